@@ -1,0 +1,5 @@
+import sys
+
+from sphcore.cli import main
+
+sys.exit(main())

@@ -1,0 +1,86 @@
+"""Command line: `sphcore run SCENE`, `sphcore keys`, `sphcore plot RUN_DIR`."""
+import argparse
+import sys
+from pathlib import Path
+
+SCENE_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+
+def scene_path(name):
+    """A path as given, else a scene shipped in scenes/ (`dam_break_2d` or `dam_break_2d.toml`)."""
+    path = Path(name)
+    if path.exists() or path.suffix == ".toml" and path.parent != Path("."):
+        return path
+    shipped = SCENE_DIR / (path.name if path.suffix else f"{path.name}.toml")
+    return shipped if shipped.exists() else path
+
+
+def cmd_run(args):
+    from sphcore.scene import Scene
+    from sphcore.simulation import run
+
+    scene = Scene.load(scene_path(args.scene))
+    options = {"local_size": args.local_size}
+    if args.backend == "vulkan":
+        options.update(device=args.device, validation=args.validation or None)
+    out = Path(args.out or Path("runs") / scene["name"])
+    arrays = run(scene, args.backend, steps=args.steps, out_dir=out, **options)
+    print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps, t = {float(arrays['time']):.4g} s "
+          f"-> {out}/final.npz, {out}/{scene['name']}.pvd")
+
+
+def cmd_keys(args):
+    from sphcore.scene import describe_schema
+
+    print(f"{'key':24} {'default':>12}  {'unit':8} {'range':18} meaning")
+    print("\n".join(describe_schema()))
+
+
+def cmd_plot(args):
+    from sphcore.plot import plot_state
+
+    out = plot_state(Path(args.run_dir) / "final.npz", args.out)
+    print(f"wrote {out}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="sphcore", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("run", help="run a scene (a .toml file or the name of one in scenes/)")
+    p.add_argument("scene")
+    p.add_argument("--backend", choices=["numba", "vulkan"], default="numba")
+    p.add_argument("--steps", type=int, help="total steps (default: the scene's time.steps)")
+    p.add_argument("--out", help="output folder (default: runs/<scene name>)")
+    p.add_argument("--local-size", type=int, default=128, help="work-group size (specialization constant)")
+    p.add_argument("--device", help="Vulkan device: index or part of its name (default: a discrete GPU, else any)")
+    p.add_argument("--validation", action="store_true", help="enable the Vulkan validation layers")
+    p.set_defaults(func=cmd_run)
+    p = sub.add_parser("keys", help="list every scene key with its default, unit and range")
+    p.set_defaults(func=cmd_keys)
+    p = sub.add_parser("plot", help="draw RUN_DIR/final.npz as a PNG")
+    p.add_argument("run_dir")
+    p.add_argument("--out", help="PNG path (default: RUN_DIR/final.png)")
+    p.set_defaults(func=cmd_plot)
+    args = parser.parse_args(argv)
+    if getattr(args, "steps", None) is not None and args.steps < 0:
+        parser.error(f"--steps must be >= 0, got {args.steps}")
+    if getattr(args, "local_size", 1) < 1:
+        parser.error(f"--local-size must be >= 1, got {args.local_size}")
+
+    from sphcore.scene import SceneError
+    from sphcore.simulation import SimulationError
+    from vk_runner import ShaderCompileError, VulkanError
+
+    try:
+        args.func(args)
+    except (SceneError, SimulationError, VulkanError, ShaderCompileError) as e:
+        print(f"sphcore: error: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("sphcore: interrupted; files written so far are complete", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,26 @@
+"""Pictures of a state: particles coloured by speed."""
+from pathlib import Path
+
+import numpy as np
+
+
+def plot_state(npz_path, out=None):
+    import json
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = np.load(npz_path)
+    scene = json.loads(str(data["scene"]))
+    lo, hi = scene["domain"]["box_min"], scene["domain"]["box_max"]
+    x, v = data["position"], data["velocity"]
+    fig, ax = plt.subplots(figsize=(7, 7 * (hi[1] - lo[1]) / (hi[0] - lo[0]) + 0.6), dpi=120)
+    dots = ax.scatter(x[:, 0], x[:, 1], c=np.hypot(v[:, 0], v[:, 1]), s=4, cmap="viridis")
+    ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), aspect="equal", xlabel="x [m]", ylabel="y [m]",
+           title=f"{scene['name']}: {len(x)} particles, t = {float(data['time']):.3f} s")
+    fig.colorbar(dots, ax=ax, label="speed [m/s]", shrink=0.8)
+    out = Path(out or Path(npz_path).with_name("final.png"))
+    fig.savefig(out, bbox_inches="tight")
+    plt.close(fig)
+    return out

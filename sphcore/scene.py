@@ -1,0 +1,217 @@
+"""Scenes: TOML files over documented defaults. Every key has a unit and a range.
+
+A scene file names only what differs from `SCHEMA`'s defaults. Unknown keys, wrong types and
+out-of-range values are rejected with a `SceneError` naming the file and the key. `sphcore
+keys` prints the table below.
+"""
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+from sphcore.params import fold_parameters, lattice_mass
+
+
+class SceneError(ValueError):
+    """A scene that cannot be run; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class Key:
+    default: object
+    unit: str
+    low: float
+    high: float
+    doc: str
+    kind: str = "float"  # float | int | vec2 | str | blocks
+
+
+SCHEMA = {
+    "name": Key("scene", "", 0, 0, "name used for output files", "str"),
+    "domain": {
+        "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls", "vec2"),
+        "box_max": Key([1.0, 1.0], "m", -1e3, 1e3, "upper corner of the walls", "vec2"),
+    },
+    "fluid": {
+        "blocks": Key([{"min": [0.1, 0.1], "max": [0.4, 0.4]}], "m", -1e3, 1e3,
+                      "rectangles filled with particles on a square lattice: [{min = [x, y], max = [x, y]}]",
+                      "blocks"),
+        "spacing": Key(0.01, "m", 1e-5, 1.0, "particle spacing dx of the initial lattice"),
+        "smoothing_ratio": Key(2.0, "-", 1.5, 6.0, "smoothing length h / spacing"),
+        "rest_density": Key(1000.0, "kg/m^3", 1.0, 1e5, "rest density rho_0"),
+        "stiffness": Key(400.0, "m^2/s^2", 1.0, 1e8,
+                         "k in p = k (rho - rho_0); k = c^2 for a speed of sound c (about 10x the fastest flow)"),
+        "viscosity": Key(1.0, "Pa s", 0.0, 1e5, "dynamic viscosity mu of Mueller's viscosity term"),
+    },
+    "forces": {
+        "gravity": Key([0.0, -9.81], "m/s^2", -1e4, 1e4, "gravitational acceleration", "vec2"),
+    },
+    "walls": {
+        "restitution": Key(0.3, "-", 0.0, 1.0, "fraction of the normal speed kept when a particle hits a wall"),
+    },
+    "time": {
+        "dt": Key(1e-4, "s", 1e-8, 1.0, "time step"),
+        "steps": Key(5000, "steps", 1, 1e9, "steps to run unless --steps is given", "int"),
+        "output_every": Key(250, "steps", 1, 1e9, "steps between snapshots", "int"),
+    },
+}
+
+MAX_PARTICLES = 50_000_000
+
+
+def _check(where, key, value):
+    """Validate one value against its Key; return it in canonical form."""
+    if key.kind == "str":
+        if not isinstance(value, str) or not value:
+            raise SceneError(f"{where}: expected a non-empty string, got {value!r}")
+        return value
+    if key.kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SceneError(f"{where}: expected an integer ({key.unit}), got {value!r}")
+    elif key.kind == "float":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{where}: expected a number ({key.unit}), got {value!r}")
+        value = float(value)
+    elif key.kind == "vec2":
+        if (not isinstance(value, list) or len(value) != 2
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+            raise SceneError(f"{where}: expected two numbers [x, y] ({key.unit}), got {value!r}")
+        return [_check(f"{where}[{i}]", Key(0, key.unit, key.low, key.high, ""), v) for i, v in enumerate(value)]
+    elif key.kind == "blocks":
+        if not isinstance(value, list) or not value:
+            raise SceneError(f"{where}: expected a list of {{min = [x, y], max = [x, y]}} tables, got {value!r}")
+        blocks = []
+        corner = Key(0, key.unit, key.low, key.high, "", "vec2")
+        for i, block in enumerate(value):
+            if not isinstance(block, dict) or set(block) != {"min", "max"}:
+                raise SceneError(f"{where}[{i}]: expected a table with exactly the keys min and max, got {block!r}")
+            lo, hi = _check(f"{where}[{i}].min", corner, block["min"]), _check(f"{where}[{i}].max", corner, block["max"])
+            if not (lo[0] < hi[0] and lo[1] < hi[1]):
+                raise SceneError(f"{where}[{i}]: min {lo} must be below max {hi} on both axes")
+            blocks.append({"min": lo, "max": hi})
+        return blocks
+    if not math.isfinite(value) or not key.low <= value <= key.high:
+        raise SceneError(f"{where} = {value!r}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
+    return value
+
+
+def _merge(where, schema, given):
+    if not isinstance(given, dict):
+        raise SceneError(f"{where}: expected a table, got {given!r}")
+    unknown = sorted(set(given) - set(schema))
+    if unknown:
+        raise SceneError(f"{where}: unknown key {unknown[0]!r} (known: {', '.join(sorted(schema))})")
+    out = {}
+    for name, key in schema.items():
+        path = f"{where}.{name}" if where else name
+        if isinstance(key, dict):
+            out[name] = _merge(path, key, given.get(name, {}))
+        else:
+            out[name] = _check(path, key, given[name]) if name in given else key.default
+    return out
+
+
+@dataclass
+class Scene:
+    """A validated scene: `config` holds every key, defaults filled in."""
+    config: dict
+    source: str = "<defaults>"
+
+    @classmethod
+    def from_dict(cls, data, source="<dict>"):
+        config = _merge("", SCHEMA, data)
+        scene = cls(config, source)
+        scene._check_geometry()
+        return scene
+
+    @classmethod
+    def load(cls, path):
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise SceneError(f"{path}: no such scene file") from None
+        except UnicodeDecodeError as e:
+            raise SceneError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+        except tomllib.TOMLDecodeError as e:
+            raise SceneError(f"{path}: malformed TOML: {e}") from None
+        try:
+            return cls.from_dict(data, str(path))
+        except SceneError as e:
+            raise SceneError(f"{path}: {e}") from None
+
+    def __getitem__(self, dotted):
+        node = self.config
+        for part in dotted.split("."):
+            node = node[part]
+        return node
+
+    @property
+    def h(self):
+        return self["fluid.spacing"] * self["fluid.smoothing_ratio"]
+
+    def _check_geometry(self):
+        lo, hi = self["domain.box_min"], self["domain.box_max"]
+        for axis in range(2):
+            if hi[axis] - lo[axis] <= 2 * self.h:
+                raise SceneError(f"domain: box_max - box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
+                                 f"2 h = {2 * self.h:g} m (h = fluid.spacing * fluid.smoothing_ratio)")
+        for i, block in enumerate(self["fluid.blocks"]):
+            if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(2)):
+                raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box {lo} .. {hi}")
+        count = sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"])
+        if count == 0:
+            raise SceneError(f"fluid.blocks: no particle fits at fluid.spacing = {self['fluid.spacing']:g} m")
+        if count > MAX_PARTICLES:
+            raise SceneError(f"fluid.blocks: {count} particles at fluid.spacing = {self['fluid.spacing']:g} m "
+                             f"exceeds {MAX_PARTICLES}; raise the spacing")
+
+    def _lattice_shape(self, block):
+        dx = self["fluid.spacing"]
+        return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(2)]
+
+    def initial_positions(self):
+        """Particles at cell centres of a square lattice filling each block, float32 (N, 2)."""
+        dx = self["fluid.spacing"]
+        parts = []
+        for block in self["fluid.blocks"]:
+            nx, ny = self._lattice_shape(block)
+            xs = block["min"][0] + dx * (np.arange(nx) + 0.5)
+            ys = block["min"][1] + dx * (np.arange(ny) + 0.5)
+            parts.append(np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2))
+        return np.concatenate(parts).astype(np.float32)
+
+    @property
+    def mass(self):
+        return lattice_mass(self["fluid.spacing"], self.h, self["fluid.rest_density"])
+
+    def params(self, n):
+        """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""
+        return fold_parameters(
+            n=n, h=self.h, mass=self.mass, rest_density=self["fluid.rest_density"],
+            stiffness=self["fluid.stiffness"], viscosity=self["fluid.viscosity"], dt=self["time.dt"],
+            restitution=self["walls.restitution"], gravity=self["forces.gravity"],
+            box_min=self["domain.box_min"], box_max=self["domain.box_max"])
+
+    def to_json(self):
+        return json.dumps(self.config, sort_keys=True)
+
+
+def describe_schema(schema=SCHEMA, prefix=""):
+    """Lines of `key  default  unit  range  doc` for every key (for `sphcore keys` and the README)."""
+    lines = []
+    for name, key in schema.items():
+        path = f"{prefix}{name}"
+        if isinstance(key, dict):
+            lines += describe_schema(key, f"{path}.")
+        else:
+            span = "" if key.kind == "str" else f"[{key.low:g}, {key.high:g}]"
+            lines.append(f"{path:24} {json.dumps(key.default):>12}  {key.unit:8} {span:18} {key.doc}")
+    return lines

@@ -1,0 +1,29 @@
+"""Launch a mirrored shader body the way Vulkan does: work groups of local invocations.
+
+`launcher(main)` returns `launch(n_groups, local_size, *args)`, the numba counterpart of
+`vkCmdDispatch(n_groups, 1, 1)` with `local_size_x = local_size`. Work groups run in
+parallel (prange); the invocations of one group run in order on one thread. The body
+`main(gid, *args)` does its own bounds check, exactly as the shader's `main()` does.
+
+Limits of this emulation (as numba's CUDA simulator documents its own): invocations of a
+group run one after another, so a body must not rely on barrier() or shared memory (a shader
+that does is mirrored with one local loop per phase); atomics must be written as fixed-order
+loops; there is no FMA contraction, which a GPU compiler may apply.
+"""
+from numba import njit, prange
+
+
+def launcher(main):
+    @njit(parallel=True)
+    def launch(n_groups, local_size, *args):
+        for group in prange(n_groups):
+            for lid in range(local_size):
+                gid = group * local_size + lid
+                main(gid, *args)
+
+    return launch
+
+
+def group_count(n, local_size):
+    """Work groups needed to cover n invocations."""
+    return (n + local_size - 1) // local_size

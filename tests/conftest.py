@@ -1,0 +1,53 @@
+import os
+
+import numpy as np
+import pytest
+
+from sphcore.backends import empty_state, make_backend, plan
+
+BACKENDS = ["numba", "vulkan"]
+
+
+def vulkan_or_skip():
+    """Skip a Vulkan test where no Vulkan device exists, except in CI, where it must exist."""
+    from vk_runner import Context, VulkanError
+    try:
+        Context().close()
+    except VulkanError as e:
+        if os.environ.get("CI"):
+            raise
+        pytest.skip(f"no Vulkan here: {e}")
+
+
+@pytest.fixture
+def open_backend():
+    """open_backend(name, params, state, stages) -> backend with validation layers on (Vulkan).
+
+    At teardown, asserts that the validation layers reported no error.
+    """
+    opened = []
+
+    def open_(name, params, state, stages, **options):
+        if name == "vulkan":
+            vulkan_or_skip()
+            options.setdefault("validation", True)
+        backend = make_backend(name, params, state, stages, **options)
+        opened.append(backend)
+        return backend
+
+    yield open_
+    for backend in opened:
+        messages = list(backend.ctx.validation_messages) if backend.name == "vulkan" else []
+        backend.close()
+        assert messages == [], f"Vulkan validation errors: {messages}"
+
+
+def scene_state(scene, jitter=0.0, seed=0):
+    """Initial state of `scene`, positions jittered by up to `jitter` * spacing (seeded)."""
+    x = scene.initial_positions()
+    if jitter:
+        rng = np.random.default_rng(seed)
+        x = x + (rng.uniform(-1, 1, x.shape) * jitter * scene["fluid.spacing"]).astype(np.float32)
+    state = empty_state(len(x))
+    state["particle_x"][:] = x
+    return state, scene.params(len(x)), plan(scene)

@@ -1,0 +1,65 @@
+"""GLSL -> SPIR-V with glslangValidator or glslc, cached by content hash.
+
+The cache key covers the shader, every .glsl file beside it (the #include targets), the
+compiler and its arguments, so an edited include rebuilds every shader that may use it.
+Cache folder: $SPHCORE_CACHE_DIR, else ~/.cache/sphcore/spirv. No SPIR-V is committed.
+"""
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+
+class ShaderCompileError(RuntimeError):
+    """No compiler, or the compiler rejected a shader (its message names file and line)."""
+
+
+INSTALL_HINT = ("no GLSL compiler found: install glslangValidator or glslc "
+                "(Debian/Ubuntu: apt-get install glslang-tools, or apt-get install glslc)")
+
+
+def find_compiler():
+    """(kind, path) of the first compiler on PATH, or raise ShaderCompileError."""
+    for kind in ("glslangValidator", "glslc"):
+        path = shutil.which(kind)
+        if path:
+            return kind, path
+    raise ShaderCompileError(INSTALL_HINT)
+
+
+def _command(kind, path, source, output, target_env):
+    if kind == "glslangValidator":
+        return [path, "-V", f"--target-env", target_env, "-I" + str(source.parent), "-o", str(output), str(source)]
+    return [path, f"--target-env={target_env}", "-fshader-stage=compute", "-I", str(source.parent),
+            "-o", str(output), str(source)]
+
+
+def cache_dir():
+    return Path(os.environ.get("SPHCORE_CACHE_DIR", Path.home() / ".cache" / "sphcore")) / "spirv"
+
+
+def compile_glsl(source, target_env="vulkan1.1"):
+    """SPIR-V bytes of the compute shader at `source`."""
+    source = Path(source).resolve()
+    kind, path = find_compiler()
+    digest = hashlib.sha256()
+    for f in [source, *sorted(source.parent.glob("*.glsl"))]:
+        digest.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    digest.update(" ".join(_command(kind, path, Path("s"), Path("o"), target_env)).encode())
+    cached = cache_dir() / f"{source.stem}-{digest.hexdigest()[:24]}.spv"
+    if cached.is_file():
+        return cached.read_bytes()
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "shader.spv"
+        proc = subprocess.run(_command(kind, path, source, out, target_env), capture_output=True, text=True)
+        if proc.returncode != 0 or not out.is_file():
+            message = (proc.stdout + proc.stderr).strip()
+            raise ShaderCompileError(f"{kind} failed to compile {source}:\n{message}")
+        code = out.read_bytes()
+    tmp_name = cached.with_suffix(f".tmp{os.getpid()}")
+    tmp_name.write_bytes(code)
+    os.replace(tmp_name, cached)
+    return code

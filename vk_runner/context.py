@@ -1,0 +1,397 @@
+"""Vulkan instance, device, buffers, compute pipelines and command buffers.
+
+Pitfalls of the `vulkan` package handled here: VK_WHOLE_SIZE is -1 there, so the full
+64-bit value is passed; pData/pValues take cdata from ffi.from_buffer; create functions
+return cdata arrays ([0]); a mapped pointer is copied out before vkUnmapMemory.
+"""
+import os
+
+import numpy as np
+
+WHOLE_SIZE = 0xFFFFFFFFFFFFFFFF
+FENCE_TIMEOUT_NS = 3600 * 10**9
+VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
+
+
+class VulkanError(RuntimeError):
+    """A Vulkan failure, with what to do about it in the message."""
+
+
+def load_vulkan():
+    """The `vulkan` module, or a VulkanError that says how to install what is missing."""
+    try:
+        import vulkan
+    except ImportError:
+        raise VulkanError("the Python package 'vulkan' is not installed: pip install vulkan "
+                          "(or pip install -e '.[vulkan]'), or run with --backend numba") from None
+    except OSError as e:  # the package is there, the loader library libvulkan.so.1 is not
+        raise VulkanError(f"no Vulkan loader (libvulkan.so.1) could be loaded ({e}): "
+                          "apt-get install libvulkan1 mesa-vulkan-drivers, or run with --backend numba") from None
+    return vulkan
+
+
+def _text(value):
+    if isinstance(value, str):
+        return value
+    return load_vulkan().ffi.string(value).decode()
+
+
+DEVICE_TYPE_RANK = ("DISCRETE_GPU", "INTEGRATED_GPU", "VIRTUAL_GPU", "CPU", "OTHER")
+
+
+class Buffer:
+    """A storage buffer in device-local memory; host-mapped where that memory is host-visible."""
+
+    def __init__(self, ctx, nbytes, name):
+        vk = ctx.vk
+        self.ctx, self.nbytes, self.name = ctx, max(int(nbytes), 4), name
+        usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
+                 | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT)
+        self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, name)
+
+    def write(self, array):
+        data = np.ascontiguousarray(array)
+        if data.nbytes > self.nbytes:
+            raise ValueError(f"{self.name}: {data.nbytes} bytes do not fit in {self.nbytes}")
+        if self.host_visible:
+            self.ctx._write_mapped(self.memory, data)
+        else:
+            staging = self.ctx._staging(data.nbytes)
+            self.ctx._write_mapped(staging.memory, data)
+            self.ctx._copy(staging.buffer, self.buffer, data.nbytes)
+            staging.free()
+
+    def read(self, dtype, shape):
+        nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        if self.host_visible:
+            return self.ctx._read_mapped(self.memory, nbytes).view(dtype).reshape(shape)
+        staging = self.ctx._staging(nbytes)
+        self.ctx._copy(self.buffer, staging.buffer, nbytes)
+        out = self.ctx._read_mapped(staging.memory, nbytes).view(dtype).reshape(shape)
+        staging.free()
+        return out
+
+    def free(self):
+        if self.buffer is not None:
+            vk = self.ctx.vk
+            vk.vkDestroyBuffer(self.ctx.device, self.buffer, None)
+            vk.vkFreeMemory(self.ctx.device, self.memory, None)
+            self.buffer = self.memory = None
+
+
+class _Staging(Buffer):
+    def __init__(self, ctx, nbytes):
+        vk = ctx.vk
+        self.ctx, self.nbytes, self.name = ctx, nbytes, "staging"
+        usage = vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT
+        flags = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+        self.buffer, self.memory, self.host_visible = ctx._allocate(nbytes, usage, flags, "staging")
+
+
+class Pipeline:
+    """A compute pipeline over `n_bindings` storage buffers with one push-constant range."""
+
+    def __init__(self, ctx, spirv, n_bindings, push_size, local_size):
+        vk = ctx.vk
+        self.ctx, self.local_size, self.push_size = ctx, local_size, push_size
+        bindings = [vk.VkDescriptorSetLayoutBinding(
+            binding=b, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=1,
+            stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT) for b in range(n_bindings)]
+        self.set_layout = vk.vkCreateDescriptorSetLayout(ctx.device, vk.VkDescriptorSetLayoutCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
+            bindingCount=n_bindings, pBindings=bindings), None)
+        ranges = [vk.VkPushConstantRange(stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT, offset=0, size=push_size)]
+        self.layout = vk.vkCreatePipelineLayout(ctx.device, vk.VkPipelineLayoutCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO, setLayoutCount=1,
+            pSetLayouts=[self.set_layout], pushConstantRangeCount=1, pPushConstantRanges=ranges), None)
+        module = vk.vkCreateShaderModule(ctx.device, vk.VkShaderModuleCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO, codeSize=len(spirv), pCode=spirv), None)
+        self._spec_data = np.array([local_size], np.uint32)  # kept alive until the pipeline exists
+        spec = vk.VkSpecializationInfo(
+            mapEntryCount=1, pMapEntries=[vk.VkSpecializationMapEntry(constantID=0, offset=0, size=4)],
+            dataSize=4, pData=vk.ffi.from_buffer(self._spec_data))
+        stage = vk.VkPipelineShaderStageCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, stage=vk.VK_SHADER_STAGE_COMPUTE_BIT,
+            module=module, pName="main", pSpecializationInfo=spec)
+        self.pipeline = vk.vkCreateComputePipelines(ctx.device, None, 1, [vk.VkComputePipelineCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO, stage=stage, layout=self.layout)], None)[0]
+        vk.vkDestroyShaderModule(ctx.device, module, None)
+        pool_size = vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=n_bindings)
+        self.pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, maxSets=1, poolSizeCount=1,
+            pPoolSizes=[pool_size]), None)
+        self.descriptor_set = vk.vkAllocateDescriptorSets(ctx.device, vk.VkDescriptorSetAllocateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO, descriptorPool=self.pool,
+            descriptorSetCount=1, pSetLayouts=[self.set_layout]))[0]
+
+    def bind(self, buffers):
+        """Bind `buffers` to bindings 0, 1, ... of the descriptor set."""
+        vk = self.ctx.vk
+        writes = [vk.VkWriteDescriptorSet(
+            sType=vk.VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, dstSet=self.descriptor_set, dstBinding=b,
+            dstArrayElement=0, descriptorCount=1, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+            pBufferInfo=[vk.VkDescriptorBufferInfo(buffer=buf.buffer, offset=0, range=WHOLE_SIZE)])
+            for b, buf in enumerate(buffers)]
+        vk.vkUpdateDescriptorSets(self.ctx.device, len(writes), writes, 0, None)
+
+    def free(self):
+        vk, dev = self.ctx.vk, self.ctx.device
+        vk.vkDestroyDescriptorPool(dev, self.pool, None)
+        vk.vkDestroyPipeline(dev, self.pipeline, None)
+        vk.vkDestroyPipelineLayout(dev, self.layout, None)
+        vk.vkDestroyDescriptorSetLayout(dev, self.set_layout, None)
+
+
+class Recording:
+    """Commands recorded into one primary command buffer; `Context.submit` runs it."""
+
+    def __init__(self, ctx):
+        vk = ctx.vk
+        self.ctx = ctx
+        self.command_buffer = vk.vkAllocateCommandBuffers(ctx.device, vk.VkCommandBufferAllocateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, commandPool=ctx.command_pool,
+            level=vk.VK_COMMAND_BUFFER_LEVEL_PRIMARY, commandBufferCount=1))[0]
+        vk.vkBeginCommandBuffer(self.command_buffer, vk.VkCommandBufferBeginInfo(
+            sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO))
+        self._keep = []
+
+    def dispatch(self, pipeline, push, n_invocations):
+        """Bind `pipeline`, push the bytes of `push` and dispatch enough groups for n invocations."""
+        vk, cb = self.ctx.vk, self.command_buffer
+        vk.vkCmdBindPipeline(cb, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.pipeline)
+        vk.vkCmdBindDescriptorSets(cb, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout, 0, 1,
+                                   [pipeline.descriptor_set], 0, None)
+        data = np.ascontiguousarray(push)
+        self._keep.append(data)
+        vk.vkCmdPushConstants(cb, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, data.nbytes,
+                              vk.ffi.from_buffer(data))
+        groups = (int(n_invocations) + pipeline.local_size - 1) // pipeline.local_size
+        if groups > 0:
+            vk.vkCmdDispatch(cb, groups, 1, 1)
+
+    def barrier(self):
+        """Make every shader write so far visible to every later shader read and write."""
+        vk = self.ctx.vk
+        barrier = vk.VkMemoryBarrier(
+            sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER, srcAccessMask=vk.VK_ACCESS_SHADER_WRITE_BIT,
+            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT)
+        vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                                vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, [barrier], 0, None, 0, None)
+
+    def end(self):
+        self.ctx.vk.vkEndCommandBuffer(self.command_buffer)
+        return self
+
+    def free(self):
+        self.ctx.vk.vkFreeCommandBuffers(self.ctx.device, self.ctx.command_pool, 1, [self.command_buffer])
+
+
+class Context:
+    """One Vulkan device with a compute queue.
+
+    device: None (a discrete GPU if present, else the best other), an index into the
+    physical-device list, or a substring of the device name; $SPHCORE_VK_DEVICE sets it too.
+    validation: enable VK_LAYER_KHRONOS_validation and collect its messages in
+    `self.validation_messages` ($SPHCORE_VK_VALIDATION=1 sets it too).
+    """
+
+    def __init__(self, device=None, validation=None):
+        self.vk = vk = load_vulkan()
+        if device is None:
+            device = os.environ.get("SPHCORE_VK_DEVICE") or None
+        if validation is None:
+            validation = os.environ.get("SPHCORE_VK_VALIDATION", "") not in ("", "0")
+        self.validation_messages = []
+        self.instance = self._create_instance(validation)
+        self.physical_device = self._choose_device(device)
+        props = vk.vkGetPhysicalDeviceProperties(self.physical_device)
+        self.device_name = _text(props.deviceName)
+        self.device_type = self._type_name(props.deviceType)
+        self.max_storage_buffer_range = int(props.limits.maxStorageBufferRange)
+        self.memory_properties = vk.vkGetPhysicalDeviceMemoryProperties(self.physical_device)
+        families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
+        self.queue_family = next(i for i, f in enumerate(families) if f.queueFlags & vk.VK_QUEUE_COMPUTE_BIT)
+        queue_info = vk.VkDeviceQueueCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO, queueFamilyIndex=self.queue_family,
+            queueCount=1, pQueuePriorities=[1.0])
+        self.device = vk.vkCreateDevice(self.physical_device, vk.VkDeviceCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO, queueCreateInfoCount=1,
+            pQueueCreateInfos=[queue_info]), None)
+        self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
+        self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
+            flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT), None)
+        self.fence = vk.vkCreateFence(self.device, vk.VkFenceCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None)
+
+    # ---- instance and device ----
+    def _create_instance(self, validation):
+        vk = self.vk
+        layers, extensions = [], []
+        if validation:
+            available = {_text(p.layerName) for p in vk.vkEnumerateInstanceLayerProperties()}
+            if VALIDATION_LAYER not in available:
+                raise VulkanError(f"validation requested but {VALIDATION_LAYER} is not installed: "
+                                  "apt-get install vulkan-validationlayers")
+            layers, extensions = [VALIDATION_LAYER], ["VK_EXT_debug_utils"]
+        app = vk.VkApplicationInfo(sType=vk.VK_STRUCTURE_TYPE_APPLICATION_INFO, pApplicationName="sphcore",
+                                   applicationVersion=1, pEngineName="sphcore", engineVersion=1,
+                                   apiVersion=vk.VK_MAKE_VERSION(1, 1, 0))
+        try:
+            instance = vk.vkCreateInstance(vk.VkInstanceCreateInfo(
+                sType=vk.VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO, pApplicationInfo=app,
+                enabledLayerCount=len(layers), ppEnabledLayerNames=layers,
+                enabledExtensionCount=len(extensions), ppEnabledExtensionNames=extensions), None)
+        except (vk.VkErrorIncompatibleDriver, vk.VkErrorInitializationFailed) as e:
+            raise VulkanError(f"no Vulkan driver could be loaded ({type(e).__name__}): apt-get install "
+                              "mesa-vulkan-drivers for lavapipe on the CPU, or install your GPU's driver; "
+                              "or run with --backend numba") from None
+        if validation:
+            def on_message(severity, kind, data, user):
+                if severity & vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT:
+                    self.validation_messages.append(_text(data.pMessage))
+                return 0
+
+            create = vk.vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT")
+            self._messenger = create(instance, vk.VkDebugUtilsMessengerCreateInfoEXT(
+                sType=vk.VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT,
+                messageSeverity=(vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT
+                                 | vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT),
+                messageType=(vk.VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT
+                             | vk.VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT),
+                pfnUserCallback=on_message), None)
+            self._on_message = on_message
+        return instance
+
+    def _type_name(self, device_type):
+        vk = self.vk
+        return {vk.VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU: "DISCRETE_GPU",
+                vk.VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU: "INTEGRATED_GPU",
+                vk.VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU: "VIRTUAL_GPU",
+                vk.VK_PHYSICAL_DEVICE_TYPE_CPU: "CPU"}.get(device_type, "OTHER")
+
+    def _choose_device(self, wanted):
+        vk = self.vk
+        try:
+            devices = list(vk.vkEnumeratePhysicalDevices(self.instance))
+        except vk.VkErrorInitializationFailed:
+            devices = []
+        if not devices:
+            raise VulkanError("no Vulkan device found (the loader found no driver): apt-get install "
+                              "mesa-vulkan-drivers for lavapipe on the CPU, or install your GPU's driver "
+                              "(check with vulkaninfo --summary); or run with --backend numba")
+        props = [vk.vkGetPhysicalDeviceProperties(d) for d in devices]
+        names = [_text(p.deviceName) for p in props]
+        if wanted is None:
+            rank = [DEVICE_TYPE_RANK.index(self._type_name(p.deviceType)) for p in props]
+            return devices[rank.index(min(rank))]
+        if str(wanted).isdigit() and int(wanted) < len(devices):
+            return devices[int(wanted)]
+        for d, name in zip(devices, names):
+            if str(wanted).lower() in name.lower():
+                return d
+        raise VulkanError(f"no Vulkan device matches {wanted!r}; available: "
+                          + ", ".join(f"[{i}] {n}" for i, n in enumerate(names)))
+
+    # ---- memory ----
+    def _allocate(self, nbytes, usage, wanted_flags, name):
+        vk = self.vk
+        props = self.memory_properties
+        host = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+        limit = self.max_storage_buffer_range
+        if usage & vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT and nbytes > limit:
+            raise VulkanError(f"out of device memory: buffer '{name}' needs {nbytes / 2**20:.1f} MiB, more than "
+                              f"this device's largest storage buffer ({limit / 2**20:.1f} MiB on {self.device_name}); "
+                              "use fewer particles or --backend numba")
+        buffer = vk.vkCreateBuffer(self.device, vk.VkBufferCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO, size=nbytes, usage=usage,
+            sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE), None)
+        req = vk.vkGetBufferMemoryRequirements(self.device, buffer)
+        types = [(i, props.memoryTypes[i].propertyFlags) for i in range(props.memoryTypeCount)
+                 if req.memoryTypeBits & (1 << i) and props.memoryTypes[i].propertyFlags & wanted_flags == wanted_flags]
+        if not types:
+            vk.vkDestroyBuffer(self.device, buffer, None)
+            raise VulkanError(f"no memory type with flags {wanted_flags:#x} for buffer '{name}' on {self.device_name}")
+        index, flags = types[0]
+        heap = props.memoryHeaps[props.memoryTypes[index].heapIndex].size
+        try:
+            if req.size > heap:
+                raise vk.VkErrorOutOfDeviceMemory()
+            memory = vk.vkAllocateMemory(self.device, vk.VkMemoryAllocateInfo(
+                sType=vk.VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO, allocationSize=req.size,
+                memoryTypeIndex=index), None)
+        except (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory):
+            vk.vkDestroyBuffer(self.device, buffer, None)
+            raise VulkanError(f"out of device memory: buffer '{name}' needs {req.size / 2**20:.1f} MiB "
+                              f"({self.device_name}, heap of {heap / 2**20:.0f} MiB); "
+                              "use fewer particles or --backend numba") from None
+        vk.vkBindBufferMemory(self.device, buffer, memory, 0)
+        return buffer, memory, flags & host == host
+
+    def _write_mapped(self, memory, data):
+        vk = self.vk
+        mapped = vk.vkMapMemory(self.device, memory, 0, data.nbytes, 0)
+        vk.ffi.memmove(mapped, vk.ffi.from_buffer(data), data.nbytes)
+        vk.vkUnmapMemory(self.device, memory)
+
+    def _read_mapped(self, memory, nbytes):
+        vk = self.vk
+        mapped = vk.vkMapMemory(self.device, memory, 0, nbytes, 0)
+        out = np.frombuffer(mapped, np.uint8, nbytes).copy()  # copy before the view dies with unmap
+        vk.vkUnmapMemory(self.device, memory)
+        return out
+
+    def _staging(self, nbytes):
+        return _Staging(self, nbytes)
+
+    def _copy(self, src, dst, nbytes):
+        rec = Recording(self)
+        self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, 1,
+                                [self.vk.VkBufferCopy(srcOffset=0, dstOffset=0, size=nbytes)])
+        self.submit(rec.end())
+        rec.free()
+
+    # ---- public ----
+    def buffer(self, nbytes, name="buffer"):
+        return Buffer(self, nbytes, name)
+
+    def pipeline(self, spirv, n_bindings, push_size, local_size=128):
+        return Pipeline(self, spirv, n_bindings, push_size, local_size)
+
+    def record(self):
+        return Recording(self)
+
+    def submit(self, recording):
+        """Run a finished recording and wait for it."""
+        vk = self.vk
+        try:
+            vk.vkQueueSubmit(self.queue, 1, [vk.VkSubmitInfo(
+                sType=vk.VK_STRUCTURE_TYPE_SUBMIT_INFO, commandBufferCount=1,
+                pCommandBuffers=[recording.command_buffer])], self.fence)
+            vk.vkWaitForFences(self.device, 1, [self.fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
+        except vk.VkErrorDeviceLost:
+            raise VulkanError(f"the Vulkan device was lost ({self.device_name}); the last checkpoint is "
+                              "intact: retry, use fewer particles, or run with --backend numba") from None
+        except (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory):
+            raise VulkanError(f"out of device memory while running on {self.device_name}: "
+                              "use fewer particles or --backend numba") from None
+        vk.vkResetFences(self.device, 1, [self.fence])
+
+    def close(self):
+        vk = self.vk
+        if getattr(self, "device", None) is None:
+            return
+        vk.vkDeviceWaitIdle(self.device)
+        vk.vkDestroyFence(self.device, self.fence, None)
+        vk.vkDestroyCommandPool(self.device, self.command_pool, None)
+        vk.vkDestroyDevice(self.device, None)
+        if getattr(self, "_messenger", None) is not None:
+            vk.vkGetInstanceProcAddr(self.instance, "vkDestroyDebugUtilsMessengerEXT")(self.instance, self._messenger, None)
+        vk.vkDestroyInstance(self.instance, None)
+        self.device = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
