@@ -14,7 +14,7 @@ from numba import njit, prange
 
 
 def launcher(main):
-    @njit(parallel=True)
+    @njit(parallel=True, error_model="numpy")  # x / 0 gives inf or NaN, as in GLSL, not ZeroDivisionError
     def launch(n_groups, local_size, *args):
         for group in prange(n_groups):
             for lid in range(local_size):

@@ -1,5 +1,9 @@
 import os
 
+# numba's OpenMP workers spin between parallel loops; on a 2-core CI machine that starves
+# lavapipe's threads. Must be set before numba starts its thread pool.
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+
 import numpy as np
 import pytest
 
