@@ -53,6 +53,16 @@ def cli_subprocess(args, cwd, env=None, executable=sys.executable):
                           capture_output=True, text=True, timeout=300)
 
 
+def assert_clean_failure(proc, out_dir, *needles):
+    """A subprocess run failed as a user should see it: exit 1, each needle in stderr, no
+    traceback, and no final state written."""
+    assert proc.returncode == 1, proc.stderr
+    for needle in needles:
+        assert needle in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not (out_dir / "final.npz").exists()
+
+
 def skip_unless_compiler():
     from vk_runner import ShaderCompileError
     from vk_runner.compiler import find_compiler
@@ -70,12 +80,7 @@ def test_malformed_toml_names_file_and_line(tmp_path):
     # a clean process, so that "no traceback" means what the user sees
     path = write(tmp_path, 'name = "x"\n[fluid]\nspacing = 0.05\nstiffness = \n', "broken.toml")
     proc = cli_subprocess(["run", path, "--out", tmp_path / "out"], cwd=tmp_path)
-    assert proc.returncode == 1, proc.stderr
-    assert "broken.toml" in proc.stderr
-    assert "malformed TOML" in proc.stderr
-    assert "line 4" in proc.stderr
-    assert "Traceback" not in proc.stderr
-    assert not (tmp_path / "out" / "final.npz").exists()
+    assert_clean_failure(proc, tmp_path / "out", "broken.toml", "malformed TOML", "line 4")
 
 
 def test_unknown_key_names_table_and_key(tmp_path, capsys):
@@ -168,12 +173,7 @@ def test_no_vulkan_loader(tmp_path):
     env["PYTHONPATH"] = os.pathsep.join([str(fake), *filter(None, [os.environ.get("PYTHONPATH")])])
     path = write(tmp_path, TINY)
     proc = cli_subprocess(["run", path, "--backend", "vulkan", "--out", tmp_path / "out"], tmp_path, env)
-    assert proc.returncode == 1, proc.stderr
-    assert "libvulkan.so.1" in proc.stderr
-    assert "apt-get install libvulkan1" in proc.stderr
-    assert "--backend numba" in proc.stderr
-    assert "Traceback" not in proc.stderr
-    assert not (tmp_path / "out" / "final.npz").exists()
+    assert_clean_failure(proc, tmp_path / "out", "libvulkan.so.1", "apt-get install libvulkan1", "--backend numba")
 
 
 def test_no_vulkan_driver(tmp_path):
@@ -186,12 +186,8 @@ def test_no_vulkan_driver(tmp_path):
     env.pop("VK_ADD_DRIVER_FILES", None)
     path = write(tmp_path, TINY)
     proc = cli_subprocess(["run", path, "--backend", "vulkan", "--out", tmp_path / "out"], tmp_path, env)
-    assert proc.returncode == 1, proc.stderr
+    assert_clean_failure(proc, tmp_path / "out", "apt-get install mesa-vulkan-drivers", "--backend numba")
     assert re.search(r"no Vulkan (driver|device)", proc.stderr), proc.stderr
-    assert "apt-get install mesa-vulkan-drivers" in proc.stderr
-    assert "--backend numba" in proc.stderr
-    assert "Traceback" not in proc.stderr
-    assert not (tmp_path / "out" / "final.npz").exists()
 
 
 def test_no_shader_compiler(tmp_path):
@@ -207,12 +203,8 @@ def test_no_shader_compiler(tmp_path):
     assert shutil.which("glslc", path=env["PATH"]) is None
     path = write(tmp_path, TINY)
     proc = cli_subprocess(["run", path, "--backend", "vulkan", "--out", tmp_path / "out"], tmp_path, env)
-    assert proc.returncode == 1, proc.stderr
-    assert "no GLSL compiler found" in proc.stderr
-    assert "apt-get install glslang-tools" in proc.stderr
-    assert "Traceback" not in proc.stderr
+    assert_clean_failure(proc, tmp_path / "out", "no GLSL compiler found", "apt-get install glslang-tools")
     assert not list((tmp_path / "cache").rglob("*.spv"))
-    assert not (tmp_path / "out" / "final.npz").exists()
 
 
 def test_shader_compile_error_names_file_and_line(tmp_path, monkeypatch):
