@@ -1,40 +1,146 @@
 """The two ways to run the shaders: their numba mirrors (default) and Vulkan.
 
 Both execute the same plan, an ordered list of stages (`plan`), over the same buffers bound
-at the same binding numbers (`BUFFERS`), with the same parameter bytes.
+at the same binding numbers (`BUFFERS`), with the same parameter bytes and the same
+specialization constants (`Scene.spec`).
+
+With the grid, every step starts by sorting the particles by cell (a counting sort through a
+HistoPyramid, seed 2), so the particle buffers are permuted every step; `particle_id` travels
+with them and `in_particle_order` undoes the permutation for output.
 """
+from collections import namedtuple
+
 import numpy as np
 
-from sphcore.params import SHADER_DIR
+from sphcore.params import SHADER_DIR, pyramid_levels
+from sphcore.sph.apply_order import apply_order
+from sphcore.sph.cell_offsets import cell_offsets
+from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
+from sphcore.sph.count_cells import count_cells
+from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
+from sphcore.sph.reduce_cells import reduce_cells
+from sphcore.sph.scatter_particles import scatter_particles
+from sphcore.sph.sort_cells import sort_cells
 from sphcore.workgroups import group_count
 
-# binding number = index; dtype and components per particle
+# binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | count)
 BUFFERS = {
-    "particle_x": (np.float32, 2),
-    "particle_v": (np.float32, 2),
-    "particle_a": (np.float32, 2),
-    "particle_rho": (np.float32, 1),
-    "particle_p": (np.float32, 1),
+    "particle_x": (np.float32, 4, "particles"),
+    "particle_v": (np.float32, 4, "particles"),
+    "particle_a": (np.float32, 4, "particles"),
+    "particle_rho": (np.float32, 1, "particles"),
+    "particle_p": (np.float32, 1, "particles"),
+    "particle_id": (np.uint32, 1, "particles"),
+    "particle_cell": (np.uint32, 1, "particles"),
+    "particle_slot": (np.uint32, 1, "particles"),
+    "cell_pyramid": (np.uint32, 1, "pyramid"),
+    "cell_start": (np.uint32, 1, "cells"),
+    "sorted_index": (np.uint32, 1, "particles"),
+    "scratch_x": (np.float32, 4, "particles"),
+    "scratch_v": (np.float32, 4, "particles"),
+    "scratch_id": (np.uint32, 1, "particles"),
+    "grid_status": (np.uint32, 1, 4),
+}
+# grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
+# [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
+STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
+
+# stage -> (mirror factory, invocations: "particles" | "cells" | "nodes", buffers its shader binds in order)
+STAGES = {
+    "clear_cells": (clear_cells, "cells", ("cell_pyramid",)),
+    "count_cells": (count_cells, "particles", ("particle_x", "particle_id", "particle_cell", "particle_slot",
+                                               "cell_pyramid", "grid_status")),
+    "reduce_cells": (reduce_cells, "nodes", ("cell_pyramid",)),
+    "cell_offsets": (cell_offsets, "cells", ("cell_pyramid", "cell_start", "grid_status")),
+    "scatter_particles": (scatter_particles, "particles", ("particle_cell", "particle_slot", "cell_start",
+                                                           "sorted_index")),
+    "sort_cells": (sort_cells, "cells", ("cell_pyramid", "cell_start", "sorted_index")),
+    "gather_particles": (gather_particles, "particles", ("particle_x", "particle_v", "particle_id", "sorted_index",
+                                                         "scratch_x", "scratch_v", "scratch_id")),
+    "apply_order": (apply_order, "particles", ("particle_x", "particle_v", "particle_id", "scratch_x",
+                                               "scratch_v", "scratch_id")),
+    "compute_density": (compute_density, "particles", ("particle_x", "particle_rho", "particle_p",
+                                                       "cell_pyramid", "cell_start")),
+    "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
+                                                     "particle_p", "cell_pyramid", "cell_start")),
+    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a")),
 }
 
-# stage -> (numba launcher, buffers its shader binds, in binding order)
-STAGES = {
-    "compute_density": (compute_density, ("particle_x", "particle_rho", "particle_p")),
-    "compute_forces": (compute_forces, ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p")),
-    "integrate": (integrate, ("particle_x", "particle_v", "particle_a")),
-}
+Stage = namedtuple("Stage", "name level")  # level: the HistoPyramid level a reduce_cells builds, else 0
+Stage.__new__.__defaults__ = (0,)
+
+
+def neighbour_stages(cell_total):
+    """The grid's stages: count particles per cell, reduce the pyramid, offsets, sort."""
+    levels = pyramid_levels(cell_total)[0]
+    return ([Stage("clear_cells"), Stage("count_cells")]
+            + [Stage("reduce_cells", level) for level in range(1, levels + 1)]
+            + [Stage("cell_offsets"), Stage("scatter_particles"), Stage("sort_cells"),
+               Stage("gather_particles"), Stage("apply_order")])
 
 
 def plan(scene):
-    """The ordered stages one time step of `scene` runs; both backends execute this list."""
-    return ["compute_density", "compute_forces", "integrate"]
+    """The ordered stages one time step of `scene` runs; both backends execute this list with
+    the specialization constants `scene.spec` (a disabled term is compiled out of its shader)."""
+    stages = neighbour_stages(int(np.prod(scene.grid_dim))) if scene.spec.GRID else []
+    return stages + [Stage("compute_density"), Stage("compute_forces"), Stage("integrate")]
 
 
-def empty_state(n):
-    return {name: np.zeros((n, c) if c > 1 else n, dtype) for name, (dtype, c) in BUFFERS.items()}
+def buffer_length(length, params):
+    if length == "particles":
+        return int(params[0]["n"])
+    if length == "cells":
+        return int(params[0]["cell_total"])
+    if length == "pyramid":
+        return pyramid_levels(int(params[0]["cell_total"]))[1]
+    return length
+
+
+def empty_state(params):
+    """Zeroed buffers for `params` (ids 0..n-1, grid status cleared)."""
+    state = {}
+    for name, (dtype, c, length) in BUFFERS.items():
+        k = buffer_length(length, params)
+        state[name] = np.zeros((k, c) if c > 1 else k, dtype)
+    state["particle_id"][:] = np.arange(len(state["particle_id"]))
+    state["grid_status"][:] = STATUS_CLEAR
+    return state
+
+
+def in_particle_order(state, dim=None):
+    """Per-particle arrays ordered by particle id (undoing the grid's sort), vectors cut to `dim`."""
+    order = np.argsort(state["particle_id"], kind="stable")
+    out = {}
+    for name, (_, c, length) in BUFFERS.items():
+        if length == "particles" and name.startswith("particle_"):
+            values = state[name][order]
+            out[name] = values[:, :dim] if c > 1 and dim else values
+    return out
+
+
+def dispatch_size(stage, params):
+    """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds."""
+    kind = STAGES[stage.name][1]
+    if kind == "particles":
+        return int(params[0]["n"])
+    cells = int(params[0]["cell_total"])
+    if kind == "cells":
+        return cells
+    for _ in range(stage.level):
+        cells = (cells + 7) // 8
+    return cells
+
+
+def stage_params(params, stage):
+    """The parameter block pushed for one dispatch of `stage` (its pyramid level filled in)."""
+    if stage.level == 0:
+        return params
+    p = params.copy()
+    p[0]["level"] = stage.level
+    return p
 
 
 class NumbaBackend:
@@ -42,22 +148,28 @@ class NumbaBackend:
 
     name = "numba"
 
-    def __init__(self, params, state, stages, local_size=128):
-        self.params, self.stages, self.local_size = params, stages, local_size
+    def __init__(self, params, state, stages, spec, local_size=128):
+        self.params, self.stages, self.spec, self.local_size = params, stages, spec, local_size
         self.state = {k: np.array(v, copy=True) for k, v in state.items()}
-        self.n_groups = group_count(int(params[0]["n"]), local_size)
+        self._launch = [(STAGES[s.name][0](spec), group_count(dispatch_size(s, params), local_size),
+                         stage_params(params, s), [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
 
     def run_stage(self, stage):
-        launch, names = STAGES[stage]
-        launch(self.n_groups, self.local_size, self.params, *(self.state[k] for k in names))
+        stage = stage if isinstance(stage, Stage) else Stage(stage)
+        launch = STAGES[stage.name][0](self.spec)
+        launch(group_count(dispatch_size(stage, self.params), self.local_size), self.local_size,
+               stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
     def step(self, count=1):
         for _ in range(count):
-            for stage in self.stages:
-                self.run_stage(stage)
+            for launch, groups, params, buffers in self._launch:
+                launch(groups, self.local_size, params, *buffers)
 
     def read(self):
         return {k: v.copy() for k, v in self.state.items()}
+
+    def clear_status(self):
+        self.state["grid_status"][:] = STATUS_CLEAR
 
     def close(self):
         pass
@@ -68,24 +180,34 @@ class VulkanBackend:
 
     name = "vulkan"
 
-    def __init__(self, params, state, stages, local_size=128, device=None, validation=None,
+    def __init__(self, params, state, stages, spec, local_size=128, device=None, validation=None,
                  steps_per_submit=64):
-        from vk_runner import Context, compile_glsl
+        from vk_runner import Context
         self.ctx = Context(device=device, validation=validation)
         self.params, self.stages, self.steps_per_submit = params, stages, steps_per_submit
-        self.n = int(params[0]["n"])
+        self.shapes = {}
         self.buffers = {}
-        for name, (dtype, c) in BUFFERS.items():
-            self.buffers[name] = self.ctx.buffer(self.n * c * np.dtype(dtype).itemsize, name)
+        for name, (dtype, c, length) in BUFFERS.items():
+            k = buffer_length(length, params)
+            self.shapes[name] = (k, c) if c > 1 else (k,)
+            self.buffers[name] = self.ctx.buffer(k * c * np.dtype(dtype).itemsize, name)
             self.buffers[name].write(state[name])
-        all_buffers = [self.buffers[name] for name in BUFFERS]
+        self.local_size, self.spec_values = local_size, spec.values()
         self.pipelines = {}
-        for stage in set(stages):
-            spirv = compile_glsl(SHADER_DIR / "sph" / f"{stage}.comp")
-            pipeline = self.ctx.pipeline(spirv, len(BUFFERS), params.dtype.itemsize, local_size)
-            pipeline.bind(all_buffers)
-            self.pipelines[stage] = pipeline
+        for name in sorted({s.name for s in stages}):
+            self._pipeline(name)
         self._recordings = {}
+
+    def _pipeline(self, name):
+        """The compute pipeline of shader `name`, built on first use with the scene's constants."""
+        from vk_runner import compile_glsl
+        if name not in self.pipelines:
+            spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp")
+            pipeline = self.ctx.pipeline(spirv, len(BUFFERS), self.params.dtype.itemsize, self.local_size,
+                                         self.spec_values)
+            pipeline.bind([self.buffers[b] for b in BUFFERS])
+            self.pipelines[name] = pipeline
+        return self.pipelines[name]
 
     def _recording(self, steps, stages):
         key = (steps, tuple(stages))
@@ -93,12 +215,15 @@ class VulkanBackend:
             rec = self.ctx.record()
             for _ in range(steps):
                 for stage in stages:
-                    rec.dispatch(self.pipelines[stage], self.params, self.n)
+                    rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
+                                 dispatch_size(stage, self.params))
                     rec.barrier()
             self._recordings[key] = rec.end()
         return self._recordings[key]
 
     def run_stage(self, stage):
+        stage = stage if isinstance(stage, Stage) else Stage(stage)
+        self._pipeline(stage.name)
         self.ctx.submit(self._recording(1, [stage]))
 
     def step(self, count=1):
@@ -109,8 +234,10 @@ class VulkanBackend:
             self.ctx.submit(self._recording(rest, self.stages))
 
     def read(self):
-        return {name: self.buffers[name].read(dtype, (self.n, c) if c > 1 else (self.n,))
-                for name, (dtype, c) in BUFFERS.items()}
+        return {name: self.buffers[name].read(dtype, self.shapes[name]) for name, (dtype, _, _) in BUFFERS.items()}
+
+    def clear_status(self):
+        self.buffers["grid_status"].write(STATUS_CLEAR)
 
     def close(self):
         if self.ctx.device is None:
@@ -128,7 +255,7 @@ class VulkanBackend:
 BACKENDS = {"numba": NumbaBackend, "vulkan": VulkanBackend}
 
 
-def make_backend(name, params, state, stages, **options):
+def make_backend(name, params, state, stages, spec, **options):
     if name not in BACKENDS:
         raise ValueError(f"unknown backend {name!r}: choose one of {', '.join(BACKENDS)}")
-    return BACKENDS[name](params, state, stages, **options)
+    return BACKENDS[name](params, state, stages, spec, **options)

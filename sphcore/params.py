@@ -7,6 +7,7 @@ both the bytes pushed to Vulkan and the `params` argument of every numba mirror
 """
 import math
 import re
+from collections import namedtuple
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ _GLSL_TYPES = {
     "vec2": (np.float32, 2, 8),
     "vec3": (np.float32, 3, 16),
     "vec4": (np.float32, 4, 16),
+    "uvec3": (np.uint32, 3, 16),
 }
 
 
@@ -55,32 +57,50 @@ def kernel_coefficients(h, dim=2):
     viscosity: lap W = c (h - r). Seed 1 used the 3D constants in a 2D simulation;
     the 2D ones below make each kernel integrate to one over the plane.
     """
-    if dim != 2:
-        raise ValueError(f"dimension {dim} is not supported yet (only 2)")
-    return {
-        "poly6": 4.0 / (math.pi * h**8),
-        "spiky_grad": -30.0 / (math.pi * h**5),
-        "visc_lap": 40.0 / (math.pi * h**5),
-    }
+    if dim == 2:
+        return {"poly6": 4.0 / (math.pi * h**8), "spiky_grad": -30.0 / (math.pi * h**5),
+                "visc_lap": 40.0 / (math.pi * h**5)}
+    if dim == 3:
+        return {"poly6": 315.0 / (64.0 * math.pi * h**9), "spiky_grad": -45.0 / (math.pi * h**6),
+                "visc_lap": 45.0 / (math.pi * h**6)}
+    raise ValueError(f"dimension must be 2 or 3, got {dim}")
 
 
-def lattice_mass(spacing, h, rest_density):
-    """Particle mass that makes a full square lattice of `spacing` sum to `rest_density`.
+def lattice_mass(spacing, h, rest_density, dim=2):
+    """Particle mass that makes a full square (cubic) lattice of `spacing` sum to `rest_density`.
 
-    With h = 2 spacing a particle has about 12 neighbours and the kernel sum on a lattice is
-    a few percent off one; scaling the mass removes that bias so a fluid at rest starts at rho_0.
+    With h = 2 spacing the kernel sum on a lattice is a few percent off one; scaling the mass
+    removes that bias so a fluid at rest starts at rho_0.
     """
     reach = int(math.ceil(h / spacing))
     offsets = np.arange(-reach, reach + 1) * spacing
-    r2 = offsets[:, None] ** 2 + offsets[None, :] ** 2
+    r2 = sum(np.meshgrid(*[offsets**2] * dim, indexing="ij"))
     q = np.clip(h * h - r2, 0.0, None)
-    return rest_density / (kernel_coefficients(h)["poly6"] * np.sum(q**3))
+    return rest_density / (kernel_coefficients(h, dim)["poly6"] * np.sum(q**3))
 
 
-def fold_parameters(n, h, mass, rest_density, stiffness, viscosity, dt, restitution,
-                    gravity, box_min, box_max):
-    """One record of PARAMS_DTYPE with all constant factors folded in (float32)."""
-    c = kernel_coefficients(h)
+# Cells are h wide, padded by 2^-12: a pair closer than h is then never two cells apart, even
+# after float32 rounding of both cell coordinates (the error is far below 2^-12 of a cell).
+CELL_PADDING = 1.0 + 2.0**-12
+MAX_CELLS = 1 << 26
+
+
+def pyramid_levels(cell_total):
+    """HistoPyramid levels above the base (8 children per node) and the buffer size of all levels."""
+    levels, size, total = 0, cell_total, cell_total
+    while size > 1:
+        size = (size + 7) // 8
+        total += size
+        levels += 1
+    return levels, total
+
+
+def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
+                    gravity, box_min, box_max, grid_dim=(1, 1, 1)):
+    """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
+    `dim` components are padded with zeros to three."""
+    c = kernel_coefficients(h, dim)
+    pad = lambda v: list(v) + [0.0] * (3 - len(v))  # noqa: E731
     params = np.zeros(1, PARAMS_DTYPE)
     p = params[0]
     p["n"] = n
@@ -89,11 +109,37 @@ def fold_parameters(n, h, mass, rest_density, stiffness, viscosity, dt, restitut
     p["density_coef"] = mass * c["poly6"]
     p["pressure_coef"] = -mass * c["spiky_grad"]
     p["viscosity_coef"] = viscosity * mass * c["visc_lap"]
+    p["cohesion_coef"] = -cohesion * c["poly6"]
     p["rest_density"] = rest_density
-    p["stiffness"] = stiffness
+    # Tait: B = rho_0 c^2 / 7 gives the linear law's sound speed c = sqrt(k) at rho_0
+    p["stiffness"] = rest_density * stiffness / 7.0 if tait else stiffness
     p["dt"] = dt
     p["restitution"] = restitution
-    p["gravity"] = gravity
-    p["box_min"] = box_min
-    p["box_max"] = box_max
+    p["inv_cell"] = 1.0 / (h * CELL_PADDING)
+    p["gravity"] = pad(gravity)
+    p["box_min"] = pad(box_min)
+    p["box_max"] = pad(box_max)
+    p["grid_dim"] = grid_dim
+    p["cell_total"] = int(np.prod(grid_dim))
+    p["levels"] = pyramid_levels(int(np.prod(grid_dim)))[0]
     return params
+
+
+def _constants(text):
+    """{name: (constant_id, default)} of every `layout(constant_id = k) const T NAME = v;` in `text`."""
+    found = re.findall(r"constant_id\s*=\s*(\d+)\)\s*const\s+(\w+)\s+(\w+)\s*=\s*(\w+)", text)
+    return {name: (int(cid), int(value) if kind == "uint" else value == "true") for cid, kind, name, value in found}
+
+
+SPEC_CONSTANTS = _constants((SHADER_DIR / "sph" / "constants.glsl").read_text())
+
+
+class Spec(namedtuple("Spec", list(SPEC_CONSTANTS))):
+    """A scene's compile-time choices: specialization constants in GLSL, closure constants in numba."""
+
+    def values(self):
+        """(constant_id, uint32 value) pairs for a VkSpecializationInfo."""
+        return [(SPEC_CONSTANTS[name][0], int(value)) for name, value in self._asdict().items()]
+
+
+DEFAULT_SPEC = Spec(**{name: default for name, (_, default) in SPEC_CONSTANTS.items()})

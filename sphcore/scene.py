@@ -16,7 +16,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from sphcore.params import fold_parameters, lattice_mass
+from sphcore.params import CELL_PADDING, MAX_CELLS, Spec, fold_parameters, lattice_mass
 
 
 class SceneError(ValueError):
@@ -30,28 +30,42 @@ class Key:
     low: float
     high: float
     doc: str
-    kind: str = "float"  # float | int | vec2 | str | blocks
+    kind: str = "float"  # float | int | vec | str | bool | blocks | one of "a|b|c"
 
 
 SCHEMA = {
     "name": Key("scene", "", 0, 0, "name used for output files", "str"),
+    "physics": {
+        "dimension": Key(2, "-", 2, 3, "2 or 3; every vector in the scene has this many components", "int"),
+        "neighbour_search": Key("grid", "", 0, 0, "grid (cells of size h, HistoPyramid counting sort) or "
+                                "all_pairs (O(n^2), no grid)", "grid|all_pairs"),
+        "equation_of_state": Key("linear", "", 0, 0, "linear: p = k (rho - rho_0) (seed 1); tait: "
+                                 "p = B ((rho/rho_0)^7 - 1), B = rho_0 k / 7 (seed 2)", "linear|tait"),
+        "viscosity": Key(True, "", 0, 0, "Mueller's viscosity term (coefficient fluid.viscosity)", "bool"),
+        "surface_tension": Key(False, "", 0, 0, "cohesion of Becker & Teschner 2007 (coefficient "
+                               "fluid.cohesion)", "bool"),
+        "gravity": Key(True, "", 0, 0, "the gravity term (vector forces.gravity)", "bool"),
+    },
     "domain": {
-        "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls", "vec2"),
-        "box_max": Key([1.0, 1.0], "m", -1e3, 1e3, "upper corner of the walls", "vec2"),
+        "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls (open: origin of the hashed grid)", "vec"),
+        "box_max": Key([1.0, 1.0], "m", -1e3, 1e3, "upper corner of the walls (open: the hash period ends here)", "vec"),
+        "boundary": Key("walls", "", 0, 0, "walls: a closed box; open: unbounded, grid cells hashed modulo "
+                        "the box (seed 2)", "walls|open"),
     },
     "fluid": {
         "blocks": Key([{"min": [0.1, 0.1], "max": [0.4, 0.4]}], "m", -1e3, 1e3,
-                      "rectangles filled with particles on a square lattice: [{min = [x, y], max = [x, y]}]",
+                      "boxes filled with particles on a square (cubic) lattice: [{min = [...], max = [...]}]",
                       "blocks"),
         "spacing": Key(0.01, "m", 1e-5, 1.0, "particle spacing dx of the initial lattice"),
         "smoothing_ratio": Key(2.0, "-", 1.5, 6.0, "smoothing length h / spacing"),
         "rest_density": Key(1000.0, "kg/m^3", 1.0, 1e5, "rest density rho_0"),
         "stiffness": Key(400.0, "m^2/s^2", 1.0, 1e8,
-                         "k in p = k (rho - rho_0); k = c^2 for a speed of sound c (about 10x the fastest flow)"),
+                         "k = c^2 for a speed of sound c (about 10x the fastest flow); linear and Tait alike"),
         "viscosity": Key(1.0, "Pa s", 0.0, 1e5, "dynamic viscosity mu of Mueller's viscosity term"),
+        "cohesion": Key(0.0, "m^dim/s^2", 0.0, 1e6, "kappa of the cohesion force -kappa sum_j W(r_ij) (x_i - x_j)"),
     },
     "forces": {
-        "gravity": Key([0.0, -9.81], "m/s^2", -1e4, 1e4, "gravitational acceleration", "vec2"),
+        "gravity": Key([0.0, -9.81], "m/s^2", -1e4, 1e4, "gravitational acceleration", "vec"),
     },
     "walls": {
         "restitution": Key(0.3, "-", 0.0, 1.0, "fraction of the normal speed kept when a particle hits a wall"),
@@ -72,6 +86,14 @@ def _check(where, key, value):
         if not isinstance(value, str) or not value:
             raise SceneError(f"{where}: expected a non-empty string, got {value!r}")
         return value
+    if "|" in key.kind:
+        if value not in key.kind.split("|"):
+            raise SceneError(f"{where} = {value!r}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
+        return value
+    if key.kind == "bool":
+        if not isinstance(value, bool):
+            raise SceneError(f"{where}: expected true or false, got {value!r}")
+        return value
     if key.kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             raise SceneError(f"{where}: expected an integer ({key.unit}), got {value!r}")
@@ -79,22 +101,22 @@ def _check(where, key, value):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise SceneError(f"{where}: expected a number ({key.unit}), got {value!r}")
         value = float(value)
-    elif key.kind == "vec2":
-        if (not isinstance(value, list) or len(value) != 2
+    elif key.kind == "vec":
+        if (not isinstance(value, list) or len(value) not in (2, 3)
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
-            raise SceneError(f"{where}: expected two numbers [x, y] ({key.unit}), got {value!r}")
+            raise SceneError(f"{where}: expected [x, y] or [x, y, z] ({key.unit}), got {value!r}")
         return [_check(f"{where}[{i}]", Key(0, key.unit, key.low, key.high, ""), v) for i, v in enumerate(value)]
     elif key.kind == "blocks":
         if not isinstance(value, list) or not value:
-            raise SceneError(f"{where}: expected a list of {{min = [x, y], max = [x, y]}} tables, got {value!r}")
+            raise SceneError(f"{where}: expected a list of {{min = [...], max = [...]}} tables, got {value!r}")
         blocks = []
-        corner = Key(0, key.unit, key.low, key.high, "", "vec2")
+        corner = Key(0, key.unit, key.low, key.high, "", "vec")
         for i, block in enumerate(value):
             if not isinstance(block, dict) or set(block) != {"min", "max"}:
                 raise SceneError(f"{where}[{i}]: expected a table with exactly the keys min and max, got {block!r}")
             lo, hi = _check(f"{where}[{i}].min", corner, block["min"]), _check(f"{where}[{i}].max", corner, block["max"])
-            if not (lo[0] < hi[0] and lo[1] < hi[1]):
-                raise SceneError(f"{where}[{i}]: min {lo} must be below max {hi} on both axes")
+            if len(lo) != len(hi) or not all(a < b for a, b in zip(lo, hi)):
+                raise SceneError(f"{where}[{i}]: min {lo} must be below max {hi} on every axis")
             blocks.append({"min": lo, "max": hi})
         return blocks
     if not math.isfinite(value) or not key.low <= value <= key.high:
@@ -127,6 +149,10 @@ class Scene:
     @classmethod
     def from_dict(cls, data, source="<dict>"):
         config = _merge("", SCHEMA, data)
+        if config["physics"]["dimension"] == 3:  # vectors left at their 2D defaults gain a z component
+            for table, name, z in (("domain", "box_min", 0.0), ("domain", "box_max", 1.0), ("forces", "gravity", 0.0)):
+                if name not in data.get(table, {}):
+                    config[table][name] = config[table][name] + [z]
         scene = cls(config, source)
         scene._check_geometry()
         return scene
@@ -154,17 +180,29 @@ class Scene:
         return node
 
     @property
+    def dim(self):
+        return self["physics.dimension"]
+
+    @property
     def h(self):
         return self["fluid.spacing"] * self["fluid.smoothing_ratio"]
 
     def _check_geometry(self):
+        dim = self.dim
+        vectors = {"domain.box_min": self["domain.box_min"], "domain.box_max": self["domain.box_max"],
+                   "forces.gravity": self["forces.gravity"]}
+        for i, block in enumerate(self["fluid.blocks"]):
+            vectors[f"fluid.blocks[{i}].min"] = block["min"]
+        for where, v in vectors.items():
+            if len(v) != dim:
+                raise SceneError(f"{where} = {v} has {len(v)} components but physics.dimension = {dim}")
         lo, hi = self["domain.box_min"], self["domain.box_max"]
-        for axis in range(2):
+        for axis in range(dim):
             if hi[axis] - lo[axis] <= 2 * self.h:
                 raise SceneError(f"domain: box_max - box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
                                  f"2 h = {2 * self.h:g} m (h = fluid.spacing * fluid.smoothing_ratio)")
         for i, block in enumerate(self["fluid.blocks"]):
-            if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(2)):
+            if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(dim)):
                 raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box {lo} .. {hi}")
         count = sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"])
         if count == 0:
@@ -172,33 +210,59 @@ class Scene:
         if count > MAX_PARTICLES:
             raise SceneError(f"fluid.blocks: {count} particles at fluid.spacing = {self['fluid.spacing']:g} m "
                              f"exceeds {MAX_PARTICLES}; raise the spacing")
+        cells = int(np.prod(self.grid_dim))
+        if cells > MAX_CELLS:
+            raise SceneError(f"domain: the neighbour grid would need {cells} cells of size h = {self.h:g} m "
+                             f"(at most {MAX_CELLS}); shrink the box or raise fluid.spacing")
+
+    @property
+    def grid_dim(self):
+        """Cells per axis (x, y, z) of the neighbour grid: the box in cells of size h (padded);
+        an open domain's hash period is at least 3 cells, so the 3^dim cells searched around
+        a particle are distinct. (1, 1, 1) for all-pairs neighbours."""
+        if self["physics.neighbour_search"] == "all_pairs":
+            return (1, 1, 1)
+        size = self.h * CELL_PADDING
+        lo, hi = self["domain.box_min"], self["domain.box_max"]
+        dims = [max(1, math.ceil((hi[a] - lo[a]) / size)) for a in range(self.dim)] + [1] * (3 - self.dim)
+        if self["domain.boundary"] == "open":
+            dims = [max(3, d) for d in dims[:self.dim]] + [1] * (3 - self.dim)
+        return tuple(dims)
 
     def _lattice_shape(self, block):
         dx = self["fluid.spacing"]
-        return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(2)]
+        return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(len(block["min"]))]
 
     def initial_positions(self):
-        """Particles at cell centres of a square lattice filling each block, float32 (N, 2)."""
+        """Particles at cell centres of a square (cubic) lattice filling each block, float32 (N, dim)."""
         dx = self["fluid.spacing"]
         parts = []
         for block in self["fluid.blocks"]:
-            nx, ny = self._lattice_shape(block)
-            xs = block["min"][0] + dx * (np.arange(nx) + 0.5)
-            ys = block["min"][1] + dx * (np.arange(ny) + 0.5)
-            parts.append(np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2))
+            axes = [block["min"][a] + dx * (np.arange(k) + 0.5) for a, k in enumerate(self._lattice_shape(block))]
+            parts.append(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, self.dim))
         return np.concatenate(parts).astype(np.float32)
 
     @property
     def mass(self):
-        return lattice_mass(self["fluid.spacing"], self.h, self["fluid.rest_density"])
+        return lattice_mass(self["fluid.spacing"], self.h, self["fluid.rest_density"], self.dim)
+
+    @property
+    def spec(self):
+        """The scene's compile-time choices (specialization constants of every shader)."""
+        physics = self.config["physics"]
+        return Spec(DIM=self.dim, GRID=physics["neighbour_search"] == "grid",
+                    WALLS=self["domain.boundary"] == "walls", TAIT=physics["equation_of_state"] == "tait",
+                    VISCOSITY=physics["viscosity"], SURFACE_TENSION=physics["surface_tension"],
+                    GRAVITY=physics["gravity"])
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""
         return fold_parameters(
-            n=n, h=self.h, mass=self.mass, rest_density=self["fluid.rest_density"],
-            stiffness=self["fluid.stiffness"], viscosity=self["fluid.viscosity"], dt=self["time.dt"],
+            n=n, dim=self.dim, h=self.h, mass=self.mass, rest_density=self["fluid.rest_density"],
+            stiffness=self["fluid.stiffness"], tait=self["physics.equation_of_state"] == "tait",
+            viscosity=self["fluid.viscosity"], cohesion=self["fluid.cohesion"], dt=self["time.dt"],
             restitution=self["walls.restitution"], gravity=self["forces.gravity"],
-            box_min=self["domain.box_min"], box_max=self["domain.box_max"])
+            box_min=self["domain.box_min"], box_max=self["domain.box_max"], grid_dim=self.grid_dim)
 
     def to_json(self):
         return json.dumps(self.config, sort_keys=True)
@@ -212,6 +276,6 @@ def describe_schema(schema=SCHEMA, prefix=""):
         if isinstance(key, dict):
             lines += describe_schema(key, f"{path}.")
         else:
-            span = "" if key.kind == "str" else f"[{key.low:g}, {key.high:g}]"
+            span = key.kind if "|" in key.kind else "" if key.kind in ("str", "bool") else f"[{key.low:g}, {key.high:g}]"
             lines.append(f"{path:24} {json.dumps(key.default):>12}  {key.unit:8} {span:18} {key.doc}")
     return lines

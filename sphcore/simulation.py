@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sphcore.backends import empty_state, make_backend, plan
+from sphcore.backends import empty_state, in_particle_order, make_backend, plan
 
 
 class SimulationError(RuntimeError):
@@ -34,13 +34,14 @@ class Simulation:
     def __init__(self, scene, backend="numba", **backend_options):
         self.scene = scene
         x0 = scene.initial_positions()
-        self.n = len(x0)
-        state = empty_state(self.n)
-        state["particle_x"][:] = x0
+        self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
+        state = empty_state(self.params)
+        state["particle_x"][:, :self.dim] = x0
         self.stages = plan(scene)
-        self.backend = make_backend(backend, self.params, state, self.stages, **backend_options)
+        self.backend = make_backend(backend, self.params, state, self.stages, scene.spec, **backend_options)
         self.step_count = 0
+        self.checked_step = 0
 
     @property
     def time(self):
@@ -51,9 +52,26 @@ class Simulation:
         self.step_count += steps
 
     def read(self):
-        state = self.backend.read()
+        """The state in particle order (vectors of `dim` components), checked."""
+        raw = self.backend.read()
+        state = in_particle_order(raw, self.dim)
         self.check(state)
+        self.check_grid(raw["grid_status"])
+        self.checked_step = self.step_count
         return state
+
+    def check_grid(self, status):
+        """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
+        steps = f"between steps {self.checked_step} and {self.step_count}"
+        if status[0]:
+            where = ("outside the box" if self.scene["domain.boundary"] == "walls"
+                     else f"beyond the hashed range (+-2^24 cells of {self.scene.h:g} m)")
+            raise SimulationError(f"{steps}: {int(status[0])} particle positions were {where} or not finite "
+                                  f"(the first: particle {int(status[1])}); likely cause: a blow-up "
+                                  f"(time.dt = {self.scene['time.dt']:g} s, estimated bound {stable_dt(self.scene)[0]:.3g} s)")
+        if status[2]:
+            raise SimulationError(f"{steps}: the neighbour grid counted a different number of particles than "
+                                  f"{self.n} in {int(status[2])} steps (a counter overflow): please report this")
 
     def check(self, state):
         """Raise SimulationError at the first particle with a non-finite value or outside the box."""
@@ -69,6 +87,8 @@ class Simulation:
                 raise SimulationError(f"blow-up by step {self.step_count} (t = {self.time:.6g} s): {name} of "
                                       f"particle {i} is {values[i]} ({int(bad.sum())} particles non-finite); "
                                       f"likely cause: {cause}")
+        if self.scene["domain.boundary"] == "open":
+            return
         x = state["particle_x"]
         lo, hi = np.asarray(self.scene["domain.box_min"]), np.asarray(self.scene["domain.box_max"])
         outside = ((x < lo) | (x > hi)).any(axis=1)

@@ -7,19 +7,32 @@ parallel (prange); the invocations of one group run in order on one thread. The 
 
 Limits of this emulation (as numba's CUDA simulator documents its own): invocations of a
 group run one after another, so a body must not rely on barrier() or shared memory (a shader
-that does is mirrored with one local loop per phase); atomics must be written as fixed-order
-loops; there is no FMA contraction, which a GPU compiler may apply.
+that does is mirrored with one local loop per phase). A body with atomics is launched with
+`parallel=False`: every invocation then runs in index order, which is one of the orders the
+GPU may choose, and the fixed one. There is no FMA contraction, which a GPU compiler may apply.
+
+Shaders take their compile-time choices as specialization constants; a mirror module
+exposes a factory `stage(spec)` that builds its body with those values as closure
+constants (numba compiles them in, so a disabled term costs nothing), cached per `spec`.
 """
 from numba import njit, prange
 
 
-def launcher(main):
-    @njit(parallel=True, error_model="numpy")  # x / 0 gives inf or NaN, as in GLSL, not ZeroDivisionError
-    def launch(n_groups, local_size, *args):
-        for group in prange(n_groups):
-            for lid in range(local_size):
-                gid = group * local_size + lid
-                main(gid, *args)
+def launcher(main, parallel=True):
+    if parallel:
+        @njit(parallel=True, error_model="numpy")  # x / 0 gives inf or NaN, as in GLSL, not ZeroDivisionError
+        def launch(n_groups, local_size, *args):
+            for group in prange(n_groups):
+                for lid in range(local_size):
+                    gid = group * local_size + lid
+                    main(gid, *args)
+    else:
+        @njit(error_model="numpy")
+        def launch(n_groups, local_size, *args):
+            for group in range(n_groups):
+                for lid in range(local_size):
+                    gid = group * local_size + lid
+                    main(gid, *args)
 
     return launch
 

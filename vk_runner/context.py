@@ -91,9 +91,10 @@ class _Staging(Buffer):
 class Pipeline:
     """A compute pipeline over `n_bindings` storage buffers with one push-constant range."""
 
-    def __init__(self, ctx, spirv, n_bindings, push_size, local_size):
+    def __init__(self, ctx, spirv, n_bindings, push_size, local_size, spec_values=()):
         vk = ctx.vk
         self.ctx, self.local_size, self.push_size = ctx, local_size, push_size
+        self.spec_values = list(spec_values)
         bindings = [vk.VkDescriptorSetLayoutBinding(
             binding=b, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=1,
             stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT) for b in range(n_bindings)]
@@ -106,10 +107,13 @@ class Pipeline:
             pSetLayouts=[self.set_layout], pushConstantRangeCount=1, pPushConstantRanges=ranges), None)
         module = vk.vkCreateShaderModule(ctx.device, vk.VkShaderModuleCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO, codeSize=len(spirv), pCode=spirv), None)
-        self._spec_data = np.array([local_size], np.uint32)  # kept alive until the pipeline exists
-        spec = vk.VkSpecializationInfo(
-            mapEntryCount=1, pMapEntries=[vk.VkSpecializationMapEntry(constantID=0, offset=0, size=4)],
-            dataSize=4, pData=vk.ffi.from_buffer(self._spec_data))
+        # constant 0: the work-group size; then (constant_id, value) pairs, each 32 bits
+        # (VkBool32 for a bool constant). Entries for ids a shader does not declare are ignored.
+        constants = [(0, local_size)] + self.spec_values
+        self._spec_data = np.array([v for _, v in constants], np.uint32)  # kept alive until the pipeline exists
+        entries = [vk.VkSpecializationMapEntry(constantID=cid, offset=4 * k, size=4) for k, (cid, _) in enumerate(constants)]
+        spec = vk.VkSpecializationInfo(mapEntryCount=len(entries), pMapEntries=entries,
+                                       dataSize=self._spec_data.nbytes, pData=vk.ffi.from_buffer(self._spec_data))
         stage = vk.VkPipelineShaderStageCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, stage=vk.VK_SHADER_STAGE_COMPUTE_BIT,
             module=module, pName="main", pSpecializationInfo=spec)
@@ -355,8 +359,8 @@ class Context:
     def buffer(self, nbytes, name="buffer"):
         return Buffer(self, nbytes, name)
 
-    def pipeline(self, spirv, n_bindings, push_size, local_size=128):
-        return Pipeline(self, spirv, n_bindings, push_size, local_size)
+    def pipeline(self, spirv, n_bindings, push_size, local_size=128, spec_values=()):
+        return Pipeline(self, spirv, n_bindings, push_size, local_size, spec_values)
 
     def record(self):
         return Recording(self)

@@ -1,36 +1,66 @@
 #version 460
-// Density and pressure, one invocation per particle, all-pairs neighbours.
+// Density and pressure, one invocation per particle. Neighbours from the grid (GRID) or all
+// pairs; wall images (WALLS); linear or Tait equation of state (TAIT).
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
+#include "constants.glsl"
+#include "cells.glsl"
 
-layout(std430, binding = 0) readonly buffer ParticleX { vec2 particle_x[]; };
+layout(std430, binding = 0) readonly buffer ParticleX { vec4 particle_x[]; };
 layout(std430, binding = 3) writeonly buffer ParticleRho { float particle_rho[]; };
 layout(std430, binding = 4) writeonly buffer ParticleP { float particle_p[]; };
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] own position
-    vec2 xi = particle_x[i];
-    // [3] wall images: within h of a wall, particle i also sees every particle mirrored
-    //     across that wall (ghost fluid: free-slip boundary of Takeda et al. 1994)
-    float wall_x = xi.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x;
-    float wall_y = xi.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y;
-    uint images_x = abs(xi.x - wall_x) < P.h ? 2u : 1u;
-    uint images_y = abs(xi.y - wall_y) < P.h ? 2u : 1u;
-    // [4] sum (h^2 - r^2)^3 over all particles and their images within h, self included
+    vec3 xi = particle_x[i].xyz;
+    // [3] wall images: within h of a wall, particle i also sees every particle mirrored across
+    //     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
+    //     that the wall nearer to xi on axis a is within h.
+    vec3 wall = vec3(xi.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
+                     xi.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
+                     xi.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
+    uint mirrored = 0u;
+    if (WALLS && abs(xi.x - wall.x) < P.h) mirrored |= 1u;
+    if (WALLS && abs(xi.y - wall.y) < P.h) mirrored |= 2u;
+    if (WALLS && DIM == 3u && abs(xi.z - wall.z) < P.h) mirrored |= 4u;
+    // [4] sum (h^2 - r^2)^3 over every particle and image within h, self included. Image
+    //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
+    //     is within h of xi's own image xm, so the cells searched are those around xm.
     float sum_w = 0.0;
-    for (uint j = 0u; j < P.n; ++j) {
-        vec2 xj = particle_x[j];
-        for (uint mx = 0u; mx < images_x; ++mx) {
-            for (uint my = 0u; my < images_y; ++my) {
-                float xk = mx == 0u ? xj.x : 2.0 * wall_x - xj.x;
-                float yk = my == 0u ? xj.y : 2.0 * wall_y - xj.y;
-                vec2 r = xi - vec2(xk, yk);
-                float r2 = r.x * r.x + r.y * r.y;
+    for (uint image = 0u; image < 8u; ++image) {
+        if ((image & ~mirrored) != 0u) continue;
+        bool fx = (image & 1u) != 0u;
+        bool fy = (image & 2u) != 0u;
+        bool fz = (image & 4u) != 0u;
+        vec3 xm = vec3(fx ? 2.0 * wall.x - xi.x : xi.x, fy ? 2.0 * wall.y - xi.y : xi.y,
+                       fz ? 2.0 * wall.z - xi.z : xi.z);
+        ivec3 base = cell_of(xm);
+        // [5] the 3^dim cells around xm (GRID), or one range holding every particle
+        uint cells = GRID ? (DIM == 3u ? 27u : 9u) : 1u;
+        for (uint k = 0u; k < cells; ++k) {
+            uint start = 0u;
+            uint end = P.n;
+            if (GRID) {
+                ivec3 c = base + ivec3(int(k % 3u) - 1, int(k / 3u % 3u) - 1, int(k / 9u) - (DIM == 3u ? 1 : 0));
+                int cell = cell_index(c);
+                if (cell < 0) continue;
+                start = cell_start[cell];
+                end = start + cell_pyramid[cell];
+            }
+            for (uint j = start; j < end; ++j) {
+                vec3 xj = particle_x[j].xyz;
+                float xk = fx ? 2.0 * wall.x - xj.x : xj.x;
+                float yk = fy ? 2.0 * wall.y - xj.y : xj.y;
+                float zk = fz ? 2.0 * wall.z - xj.z : xj.z;
+                vec3 r = xi - vec3(xk, yk, zk);
+                float r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 < P.h2) {
                     float q = P.h2 - r2;
                     sum_w += q * q * q;
@@ -38,11 +68,21 @@ void main() {
             }
         }
     }
-    // [5] rho_i = m sum_j W_poly6(r_ij, h)
+    // [6] rho_i = m sum_j W_poly6(r_ij, h)
     float rho = P.density_coef * sum_w;
-    // [6] linear equation of state p = k (rho - rho_0), clamped at 0 so the free surface does not pull
-    float p = max(P.stiffness * (rho - P.rest_density), 0.0);
-    // [7] store
+    // [7] equation of state, clamped at 0 so that the free surface does not pull (tensile
+    //     instability); attraction, where a scene wants it, comes from the cohesion term.
+    //     linear: p = k (rho - rho_0) (seed 1); Tait: p = B ((rho / rho_0)^7 - 1) (Becker &
+    //     Teschner 2007, seed 2), the power by multiplications
+    float p = P.stiffness * (rho - P.rest_density);
+    if (TAIT) {
+        float ratio = rho / P.rest_density;
+        float ratio2 = ratio * ratio;
+        float ratio4 = ratio2 * ratio2;
+        p = P.stiffness * (ratio4 * ratio2 * ratio - 1.0);
+    }
+    p = max(p, 0.0);
+    // [8] store
     particle_rho[i] = rho;
     particle_p[i] = p;
 }

@@ -1,75 +1,117 @@
 #version 460
-// Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003) and gravity,
-// one invocation per particle, all-pairs neighbours, mirror images at the walls.
+// Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003), surface
+// tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
+// Neighbours and wall images as in compute_density; each optional term is compiled out by its
+// specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
+#include "constants.glsl"
+#include "cells.glsl"
 
-layout(std430, binding = 0) readonly buffer ParticleX { vec2 particle_x[]; };
-layout(std430, binding = 1) readonly buffer ParticleV { vec2 particle_v[]; };
-layout(std430, binding = 2) writeonly buffer ParticleA { vec2 particle_a[]; };
+layout(std430, binding = 0) readonly buffer ParticleX { vec4 particle_x[]; };
+layout(std430, binding = 1) readonly buffer ParticleV { vec4 particle_v[]; };
+layout(std430, binding = 2) writeonly buffer ParticleA { vec4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { float particle_rho[]; };
 layout(std430, binding = 4) readonly buffer ParticleP { float particle_p[]; };
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] own state
-    vec2 xi = particle_x[i];
-    vec2 vi = particle_v[i];
+    vec3 xi = particle_x[i].xyz;
+    vec3 vi = particle_v[i].xyz;
     float rhoi = particle_rho[i];
     float pi = particle_p[i];
     float pi_rho2 = pi / (rhoi * rhoi);
     // [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
-    float wall_x = xi.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x;
-    float wall_y = xi.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y;
-    uint images_x = abs(xi.x - wall_x) < P.h ? 2u : 1u;
-    uint images_y = abs(xi.y - wall_y) < P.h ? 2u : 1u;
-    // [4] pressure acceleration and viscous force density summed over all other particles and all images within h
-    vec2 f_pressure = vec2(0.0);
-    vec2 f_viscosity = vec2(0.0);
-    for (uint j = 0u; j < P.n; ++j) {
-        vec2 xj = particle_x[j];
-        vec2 vj = particle_v[j];
-        float rhoj = particle_rho[j];
-        float pj = particle_p[j];
-        for (uint mx = 0u; mx < images_x; ++mx) {
-            for (uint my = 0u; my < images_y; ++my) {
-                if (j == i && mx == 0u && my == 0u) continue;
-                float xk = mx == 0u ? xj.x : 2.0 * wall_x - xj.x;
-                float yk = my == 0u ? xj.y : 2.0 * wall_y - xj.y;
-                float vk_x = mx == 0u ? vj.x : -vj.x;
-                float vk_y = my == 0u ? vj.y : -vj.y;
-                vec2 r = xi - vec2(xk, yk);
-                float r2 = r.x * r.x + r.y * r.y;
+    vec3 wall = vec3(xi.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
+                     xi.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
+                     xi.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
+    uint mirrored = 0u;
+    if (WALLS && abs(xi.x - wall.x) < P.h) mirrored |= 1u;
+    if (WALLS && abs(xi.y - wall.y) < P.h) mirrored |= 2u;
+    if (WALLS && DIM == 3u && abs(xi.z - wall.z) < P.h) mirrored |= 4u;
+    // [4] sums over every other particle and every image within h
+    vec3 f_pressure = vec3(0.0);
+    vec3 f_viscosity = vec3(0.0);
+    vec3 f_cohesion = vec3(0.0);
+    for (uint image = 0u; image < 8u; ++image) {
+        if ((image & ~mirrored) != 0u) continue;
+        bool fx = (image & 1u) != 0u;
+        bool fy = (image & 2u) != 0u;
+        bool fz = (image & 4u) != 0u;
+        vec3 xm = vec3(fx ? 2.0 * wall.x - xi.x : xi.x, fy ? 2.0 * wall.y - xi.y : xi.y,
+                       fz ? 2.0 * wall.z - xi.z : xi.z);
+        ivec3 base = cell_of(xm);
+        // [5] the 3^dim cells around xm (GRID), or one range holding every particle
+        uint cells = GRID ? (DIM == 3u ? 27u : 9u) : 1u;
+        for (uint k = 0u; k < cells; ++k) {
+            uint start = 0u;
+            uint end = P.n;
+            if (GRID) {
+                ivec3 c = base + ivec3(int(k % 3u) - 1, int(k / 3u % 3u) - 1, int(k / 9u) - (DIM == 3u ? 1 : 0));
+                int cell = cell_index(c);
+                if (cell < 0) continue;
+                start = cell_start[cell];
+                end = start + cell_pyramid[cell];
+            }
+            for (uint j = start; j < end; ++j) {
+                if (j == i && image == 0u) continue;
+                vec3 xj = particle_x[j].xyz;
+                float xk = fx ? 2.0 * wall.x - xj.x : xj.x;
+                float yk = fy ? 2.0 * wall.y - xj.y : xj.y;
+                float zk = fz ? 2.0 * wall.z - xj.z : xj.z;
+                vec3 r = xi - vec3(xk, yk, zk);
+                float r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 >= P.h2) continue;
+                float rhoj = particle_rho[j];
+                float pj = particle_p[j];
                 float rlen = sqrt(r2);
                 float hr = P.h - rlen;
-                // [5] direction from the neighbour to i. Where the two coincide (normalize(0) is NaN):
-                //     an image coincides with i only on a wall, so push along the wall's inward
-                //     normal; two particles are pushed apart along x, antisymmetrically in (i, j)
-                //     so momentum is conserved
-                vec2 r_hat = vec2(i < j ? -1.0 : 1.0, 0.0);
-                if (mx == 1u) r_hat = vec2(wall_x == P.box_min.x ? 1.0 : -1.0, 0.0);
-                if (my == 1u) r_hat = vec2(0.0, wall_y == P.box_min.y ? 1.0 : -1.0);
+                // [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
+                //     NaN): an image coincides with i only on a wall, so push along that wall's
+                //     inward normal; two particles are pushed apart along x, antisymmetrically in
+                //     (i, j), so momentum is conserved
+                vec3 r_hat = vec3(i < j ? -1.0 : 1.0, 0.0, 0.0);
+                if (fx) r_hat = vec3(wall.x == P.box_min.x ? 1.0 : -1.0, 0.0, 0.0);
+                if (fy) r_hat = vec3(0.0, wall.y == P.box_min.y ? 1.0 : -1.0, 0.0);
+                if (fz) r_hat = vec3(0.0, 0.0, wall.z == P.box_min.z ? 1.0 : -1.0);
                 if (rlen > 0.0) r_hat = r / rlen;
-                // [6] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that conserves
-                //     momentum and energy with summation density (Monaghan 1992); grad W_spiky = -30/(pi h^5) (h - r)^2 r_hat.
-                //     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates grad p / 2,
-                //     so a column at rest settles at twice its hydrostatic pressure, and it over-pushes
-                //     low-density surface particles, which gains energy in a dam break
+                // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
+                //     conserves momentum and energy with summation density (Monaghan 1992).
+                //     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
+                //     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
                 float fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr;
                 f_pressure += fp * r_hat;
-                // [7] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc, lap W_visc = 40/(pi h^5) (h - r)
-                float fv = P.viscosity_coef / rhoj * hr;
-                f_viscosity += fv * vec2(vk_x - vi.x, vk_y - vi.y);
+                // [8] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc; an image's velocity is
+                //     mirrored on its flipped axes
+                if (VISCOSITY) {
+                    vec3 vj = particle_v[j].xyz;
+                    float vk_x = fx ? -vj.x : vj.x;
+                    float vk_y = fy ? -vj.y : vj.y;
+                    float vk_z = fz ? -vj.z : vj.z;
+                    float fv = P.viscosity_coef / rhoj * hr;
+                    f_viscosity += fv * vec3(vk_x - vi.x, vk_y - vi.y, vk_z - vi.z);
+                }
+                // [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
+                //     particles only: the walls are not wetted
+                if (SURFACE_TENSION && image == 0u) {
+                    float q = P.h2 - r2;
+                    f_cohesion += q * q * q * r;
+                }
             }
         }
     }
-    // [8] a_i = f_pressure + f_viscosity / rho_i + g (f_pressure is already per unit mass)
-    vec2 a = f_pressure + f_viscosity / rhoi + P.gravity;
-    // [9] store
-    particle_a[i] = a;
+    // [10] a_i = f_pressure + f_viscosity / rho_i + cohesion + g (f_pressure is per unit mass)
+    vec3 a = f_pressure;
+    if (VISCOSITY) a += f_viscosity / rhoi;
+    if (SURFACE_TENSION) a += P.cohesion_coef * f_cohesion;
+    if (GRAVITY) a += P.gravity;
+    // [11] store
+    particle_a[i] = vec4(a, 0.0);
 }

@@ -4,26 +4,31 @@
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
+#include "constants.glsl"
 
-layout(std430, binding = 0) buffer ParticleX { vec2 particle_x[]; };
-layout(std430, binding = 1) buffer ParticleV { vec2 particle_v[]; };
-layout(std430, binding = 2) readonly buffer ParticleA { vec2 particle_a[]; };
+layout(std430, binding = 0) buffer ParticleX { vec4 particle_x[]; };
+layout(std430, binding = 1) buffer ParticleV { vec4 particle_v[]; };
+layout(std430, binding = 2) readonly buffer ParticleA { vec4 particle_a[]; };
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] symplectic Euler: v += dt a, then x += dt v
-    vec2 v = particle_v[i] + P.dt * particle_a[i];
-    vec2 x = particle_x[i] + P.dt * v;
+    vec3 v = particle_v[i].xyz + P.dt * particle_a[i].xyz;
+    vec3 x = particle_x[i].xyz + P.dt * v;
     // [3] walls: each axis is tested on its own (no else-if), so a particle past a corner is
-    //     put back on both walls in the same step. Clamp the position; an outward normal
-    //     speed is reversed and scaled by the restitution, an inward one is kept.
-    if (x.x < P.box_min.x) { x.x = P.box_min.x; v.x = max(v.x, -P.restitution * v.x); }
-    if (x.x > P.box_max.x) { x.x = P.box_max.x; v.x = min(v.x, -P.restitution * v.x); }
-    if (x.y < P.box_min.y) { x.y = P.box_min.y; v.y = max(v.y, -P.restitution * v.y); }
-    if (x.y > P.box_max.y) { x.y = P.box_max.y; v.y = min(v.y, -P.restitution * v.y); }
+    //     put back on every wall it crossed in the same step. Clamp the position; an outward
+    //     normal speed is reversed and scaled by the restitution, an inward one is kept.
+    if (WALLS) {
+        if (x.x < P.box_min.x) { x.x = P.box_min.x; v.x = max(v.x, -P.restitution * v.x); }
+        if (x.x > P.box_max.x) { x.x = P.box_max.x; v.x = min(v.x, -P.restitution * v.x); }
+        if (x.y < P.box_min.y) { x.y = P.box_min.y; v.y = max(v.y, -P.restitution * v.y); }
+        if (x.y > P.box_max.y) { x.y = P.box_max.y; v.y = min(v.y, -P.restitution * v.y); }
+        if (DIM == 3u && x.z < P.box_min.z) { x.z = P.box_min.z; v.z = max(v.z, -P.restitution * v.z); }
+        if (DIM == 3u && x.z > P.box_max.z) { x.z = P.box_max.z; v.z = min(v.z, -P.restitution * v.z); }
+    }
     // [4] store
-    particle_x[i] = x;
-    particle_v[i] = v;
+    particle_x[i] = vec4(x, 0.0);
+    particle_v[i] = vec4(v, 0.0);
 }

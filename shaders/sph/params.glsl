@@ -1,19 +1,26 @@
-// Parameter block shared by every SPH shader: one push-constant range, read as `P.name`.
-// The numba mirrors read the same bytes: sphcore/params.py parses this block into a numpy
-// record dtype (std430 offsets), so the two sides cannot drift. All coefficients are folded
-// on the host (sphcore/params.py: fold_parameters); units are SI.
+// Parameter block shared by every shader (SPH and neighbour grid): one push-constant range,
+// read as `P.name`. The numba mirrors read the same bytes: sphcore/params.py parses this block
+// into a numpy record dtype (std430 offsets), so the two sides cannot drift. All coefficients
+// are folded on the host (sphcore/params.py: fold_parameters); units are SI. In 2D the z
+// components are 0 and unused.
 layout(push_constant) uniform Params {
     uint n;               // particle count
     float h;              // smoothing length [m]
     float h2;             // h^2 [m^2]
-    float density_coef;   // m * 4 / (pi h^8): rho_i = density_coef * sum_j (h^2 - r^2)^3   [kg/m^2 / m^6]
-    float pressure_coef;  // m * 30 / (pi h^5): minus m times the coefficient of grad W_spiky
-    float viscosity_coef; // mu * m * 40 / (pi h^5): mu * m * lap W_visc's coefficient
-    float rest_density;   // rho_0 [kg/m^2] (2D: mass per unit area)
-    float stiffness;      // k in p = k (rho - rho_0) [m^2/s^2]
+    float density_coef;   // m W_poly6's coefficient: 2D m 4/(pi h^8), 3D m 315/(64 pi h^9)
+    float pressure_coef;  // minus m times grad W_spiky's coefficient: 2D m 30/(pi h^5), 3D m 45/(pi h^6)
+    float viscosity_coef; // mu m lap W_visc's coefficient: 2D mu m 40/(pi h^5), 3D mu m 45/(pi h^6)
+    float cohesion_coef;  // kappa times W_poly6's coefficient (surface tension by cohesion)
+    float rest_density;   // rho_0 [kg/m^3] (2D: kg/m^2)
+    float stiffness;      // linear: k in p = k (rho - rho_0); Tait: B in p = B ((rho/rho_0)^7 - 1)
     float dt;             // time step [s]
     float restitution;    // fraction of the normal speed kept on a wall bounce [-]
-    vec2 gravity;         // [m/s^2]
-    vec2 box_min;         // walls [m]
-    vec2 box_max;         // walls [m]
+    float inv_cell;       // 1 / cell size of the neighbour grid [1/m]
+    vec3 gravity;         // [m/s^2]
+    uint level;           // HistoPyramid level a reduce_cells dispatch writes (1 = first above the base)
+    vec3 box_min;         // walls, and the origin of the neighbour grid [m]
+    uint cell_total;      // cells in the grid: grid_dim.x * grid_dim.y * grid_dim.z
+    vec3 box_max;         // walls [m]
+    uint levels;          // HistoPyramid levels above the base (the last one holds one node: the total)
+    uvec3 grid_dim;       // cells per axis (the hash period per axis in an open domain)
 } P;

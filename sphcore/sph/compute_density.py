@@ -1,53 +1,103 @@
-"""Density and pressure, one invocation per particle, all-pairs neighbours.
+"""Density and pressure, one invocation per particle. Neighbours from the grid (GRID) or all
+pairs; wall images (WALLS); linear or Tait equation of state (TAIT).
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
-labels. A GLSL vec2 local `v` is `v_x, v_y` here.
+labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
 """
+from functools import lru_cache
+
 import numpy as np
 from numba import njit
 
+from sphcore.sph.cells import cells
 from sphcore.workgroups import launcher
 
 f32 = np.float32
 
 
-@njit
-def compute_density_main(i, params, particle_x, particle_rho, particle_p):
-    P = params[0]
-    # [1] one invocation per particle; the grid is rounded up to whole work groups
-    if i >= P.n:
-        return
-    # [2] own position
-    xi_x = particle_x[i, 0]
-    xi_y = particle_x[i, 1]
-    # [3] wall images: within h of a wall, particle i also sees every particle mirrored
-    #     across that wall (ghost fluid: free-slip boundary of Takeda et al. 1994)
-    wall_x = P.box_min[0] if xi_x - P.box_min[0] < P.h else P.box_max[0]
-    wall_y = P.box_min[1] if xi_y - P.box_min[1] < P.h else P.box_max[1]
-    images_x = 2 if abs(xi_x - wall_x) < P.h else 1
-    images_y = 2 if abs(xi_y - wall_y) < P.h else 1
-    # [4] sum (h^2 - r^2)^3 over all particles and their images within h, self included
-    sum_w = f32(0.0)
-    for j in range(P.n):
-        xj_x = particle_x[j, 0]
-        xj_y = particle_x[j, 1]
-        for mx in range(images_x):
-            for my in range(images_y):
-                xk = xj_x if mx == 0 else f32(2.0) * wall_x - xj_x
-                yk = xj_y if my == 0 else f32(2.0) * wall_y - xj_y
-                r_x = xi_x - xk
-                r_y = xi_y - yk
-                r2 = r_x * r_x + r_y * r_y
-                if r2 < P.h2:
-                    q = P.h2 - r2
-                    sum_w += q * q * q
-    # [5] rho_i = m sum_j W_poly6(r_ij, h)
-    rho = P.density_coef * sum_w
-    # [6] linear equation of state p = k (rho - rho_0), clamped at 0 so the free surface does not pull
-    p = max(P.stiffness * (rho - P.rest_density), f32(0.0))
-    # [7] store
-    particle_rho[i] = rho
-    particle_p[i] = p
+@lru_cache(maxsize=None)
+def compute_density(spec):
+    DIM, GRID, WALLS, TAIT = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT
+    cell_of, cell_index = cells(spec)
 
+    @njit
+    def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start):
+        P = params[0]
+        # [1] one invocation per particle; the grid is rounded up to whole work groups
+        if i >= P.n:
+            return
+        # [2] own position
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
+        # [3] wall images: within h of a wall, particle i also sees every particle mirrored across
+        #     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
+        #     that the wall nearer to xi on axis a is within h.
+        wall_x = P.box_min[0] if xi_x - P.box_min[0] < P.h else P.box_max[0]
+        wall_y = P.box_min[1] if xi_y - P.box_min[1] < P.h else P.box_max[1]
+        wall_z = P.box_min[2] if xi_z - P.box_min[2] < P.h else P.box_max[2]
+        mirrored = 0
+        if WALLS and abs(xi_x - wall_x) < P.h:
+            mirrored |= 1
+        if WALLS and abs(xi_y - wall_y) < P.h:
+            mirrored |= 2
+        if WALLS and DIM == 3 and abs(xi_z - wall_z) < P.h:
+            mirrored |= 4
+        # [4] sum (h^2 - r^2)^3 over every particle and image within h, self included. Image
+        #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
+        #     is within h of xi's own image xm, so the cells searched are those around xm.
+        sum_w = f32(0.0)
+        for image in range(8):
+            if (image & ~mirrored) != 0:
+                continue
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
+            xm_x = f32(2.0) * wall_x - xi_x if fx else xi_x
+            xm_y = f32(2.0) * wall_y - xi_y if fy else xi_y
+            xm_z = f32(2.0) * wall_z - xi_z if fz else xi_z
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # [5] the 3^dim cells around xm (GRID), or one range holding every particle
+            cells = (27 if DIM == 3 else 9) if GRID else 1
+            for k in range(cells):
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    cell = cell_index(P, base_x + k % 3 - 1, base_y + k // 3 % 3 - 1,
+                                      base_z + k // 9 - (1 if DIM == 3 else 0))
+                    if cell < 0:
+                        continue
+                    start = int(cell_start[cell])
+                    end = start + int(cell_pyramid[cell])
+                for j in range(start, end):
+                    xj_x = particle_x[j, 0]
+                    xj_y = particle_x[j, 1]
+                    xj_z = particle_x[j, 2]
+                    xk = f32(2.0) * wall_x - xj_x if fx else xj_x
+                    yk = f32(2.0) * wall_y - xj_y if fy else xj_y
+                    zk = f32(2.0) * wall_z - xj_z if fz else xj_z
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if r2 < P.h2:
+                        q = P.h2 - r2
+                        sum_w += q * q * q
+        # [6] rho_i = m sum_j W_poly6(r_ij, h)
+        rho = P.density_coef * sum_w
+        # [7] equation of state, clamped at 0 so that the free surface does not pull (tensile
+        #     instability); attraction, where a scene wants it, comes from the cohesion term.
+        #     linear: p = k (rho - rho_0) (seed 1); Tait: p = B ((rho / rho_0)^7 - 1) (Becker &
+        #     Teschner 2007, seed 2), the power by multiplications
+        p = P.stiffness * (rho - P.rest_density)
+        if TAIT:
+            ratio = rho / P.rest_density
+            ratio2 = ratio * ratio
+            ratio4 = ratio2 * ratio2
+            p = P.stiffness * (ratio4 * ratio2 * ratio - f32(1.0))
+        p = max(p, f32(0.0))
+        # [8] store
+        particle_rho[i] = rho
+        particle_p[i] = p
 
-compute_density = launcher(compute_density_main)
+    return launcher(compute_density_main)

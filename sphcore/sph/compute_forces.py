@@ -1,96 +1,170 @@
-"""Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003) and gravity,
-one invocation per particle, all-pairs neighbours, mirror images at the walls.
+"""Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003), surface
+tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
+Neighbours and wall images as in compute_density; each optional term is compiled out by its
+closure constant, as the shader's by its specialization constant.
 
 Mirror of shaders/sph/compute_forces.comp: same names, same statement order, same step
-labels. A GLSL vec2 local `v` is `v_x, v_y` here.
+labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
 """
+from functools import lru_cache
+
 import numpy as np
 from numba import njit
 
+from sphcore.sph.cells import cells
 from sphcore.workgroups import launcher
 
 f32 = np.float32
 
 
-@njit
-def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p):
-    P = params[0]
-    # [1] one invocation per particle; the grid is rounded up to whole work groups
-    if i >= P.n:
-        return
-    # [2] own state
-    xi_x = particle_x[i, 0]
-    xi_y = particle_x[i, 1]
-    vi_x = particle_v[i, 0]
-    vi_y = particle_v[i, 1]
-    rhoi = particle_rho[i]
-    pi = particle_p[i]
-    pi_rho2 = pi / (rhoi * rhoi)
-    # [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
-    wall_x = P.box_min[0] if xi_x - P.box_min[0] < P.h else P.box_max[0]
-    wall_y = P.box_min[1] if xi_y - P.box_min[1] < P.h else P.box_max[1]
-    images_x = 2 if abs(xi_x - wall_x) < P.h else 1
-    images_y = 2 if abs(xi_y - wall_y) < P.h else 1
-    # [4] pressure acceleration and viscous force density summed over all other particles and all images within h
-    f_pressure_x = f32(0.0)
-    f_pressure_y = f32(0.0)
-    f_viscosity_x = f32(0.0)
-    f_viscosity_y = f32(0.0)
-    for j in range(P.n):
-        xj_x = particle_x[j, 0]
-        xj_y = particle_x[j, 1]
-        vj_x = particle_v[j, 0]
-        vj_y = particle_v[j, 1]
-        rhoj = particle_rho[j]
-        pj = particle_p[j]
-        for mx in range(images_x):
-            for my in range(images_y):
-                if j == i and mx == 0 and my == 0:
-                    continue
-                xk = xj_x if mx == 0 else f32(2.0) * wall_x - xj_x
-                yk = xj_y if my == 0 else f32(2.0) * wall_y - xj_y
-                vk_x = vj_x if mx == 0 else -vj_x
-                vk_y = vj_y if my == 0 else -vj_y
-                r_x = xi_x - xk
-                r_y = xi_y - yk
-                r2 = r_x * r_x + r_y * r_y
-                if r2 >= P.h2:
-                    continue
-                rlen = np.sqrt(r2)
-                hr = P.h - rlen
-                # [5] direction from the neighbour to i. Where the two coincide (normalize(0) is NaN):
-                #     an image coincides with i only on a wall, so push along the wall's inward
-                #     normal; two particles are pushed apart along x, antisymmetrically in (i, j)
-                #     so momentum is conserved
-                r_hat_x = f32(-1.0) if i < j else f32(1.0)
-                r_hat_y = f32(0.0)
-                if mx == 1:
-                    r_hat_x = f32(1.0) if wall_x == P.box_min[0] else f32(-1.0)
+@lru_cache(maxsize=None)
+def compute_forces(spec):
+    DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
+    VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
+    cell_of, cell_index = cells(spec)
+
+    @njit
+    def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
+                            cell_pyramid, cell_start):
+        P = params[0]
+        # [1] one invocation per particle; the grid is rounded up to whole work groups
+        if i >= P.n:
+            return
+        # [2] own state
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
+        vi_x = particle_v[i, 0]
+        vi_y = particle_v[i, 1]
+        vi_z = particle_v[i, 2]
+        rhoi = particle_rho[i]
+        pi = particle_p[i]
+        pi_rho2 = pi / (rhoi * rhoi)
+        # [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
+        wall_x = P.box_min[0] if xi_x - P.box_min[0] < P.h else P.box_max[0]
+        wall_y = P.box_min[1] if xi_y - P.box_min[1] < P.h else P.box_max[1]
+        wall_z = P.box_min[2] if xi_z - P.box_min[2] < P.h else P.box_max[2]
+        mirrored = 0
+        if WALLS and abs(xi_x - wall_x) < P.h:
+            mirrored |= 1
+        if WALLS and abs(xi_y - wall_y) < P.h:
+            mirrored |= 2
+        if WALLS and DIM == 3 and abs(xi_z - wall_z) < P.h:
+            mirrored |= 4
+        # [4] sums over every other particle and every image within h
+        f_pressure_x = f32(0.0)
+        f_pressure_y = f32(0.0)
+        f_pressure_z = f32(0.0)
+        f_viscosity_x = f32(0.0)
+        f_viscosity_y = f32(0.0)
+        f_viscosity_z = f32(0.0)
+        f_cohesion_x = f32(0.0)
+        f_cohesion_y = f32(0.0)
+        f_cohesion_z = f32(0.0)
+        for image in range(8):
+            if (image & ~mirrored) != 0:
+                continue
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
+            xm_x = f32(2.0) * wall_x - xi_x if fx else xi_x
+            xm_y = f32(2.0) * wall_y - xi_y if fy else xi_y
+            xm_z = f32(2.0) * wall_z - xi_z if fz else xi_z
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # [5] the 3^dim cells around xm (GRID), or one range holding every particle
+            cells = (27 if DIM == 3 else 9) if GRID else 1
+            for k in range(cells):
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    cell = cell_index(P, base_x + k % 3 - 1, base_y + k // 3 % 3 - 1,
+                                      base_z + k // 9 - (1 if DIM == 3 else 0))
+                    if cell < 0:
+                        continue
+                    start = int(cell_start[cell])
+                    end = start + int(cell_pyramid[cell])
+                for j in range(start, end):
+                    if j == i and image == 0:
+                        continue
+                    xj_x = particle_x[j, 0]
+                    xj_y = particle_x[j, 1]
+                    xj_z = particle_x[j, 2]
+                    xk = f32(2.0) * wall_x - xj_x if fx else xj_x
+                    yk = f32(2.0) * wall_y - xj_y if fy else xj_y
+                    zk = f32(2.0) * wall_z - xj_z if fz else xj_z
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if r2 >= P.h2:
+                        continue
+                    rhoj = particle_rho[j]
+                    pj = particle_p[j]
+                    rlen = np.sqrt(r2)
+                    hr = P.h - rlen
+                    # [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
+                    #     NaN): an image coincides with i only on a wall, so push along that wall's
+                    #     inward normal; two particles are pushed apart along x, antisymmetrically in
+                    #     (i, j), so momentum is conserved
+                    r_hat_x = f32(-1.0) if i < j else f32(1.0)
                     r_hat_y = f32(0.0)
-                if my == 1:
-                    r_hat_x = f32(0.0)
-                    r_hat_y = f32(1.0) if wall_y == P.box_min[1] else f32(-1.0)
-                if rlen > f32(0.0):
-                    r_hat_x = r_x / rlen
-                    r_hat_y = r_y / rlen
-                # [6] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that conserves
-                #     momentum and energy with summation density (Monaghan 1992); grad W_spiky = -30/(pi h^5) (h - r)^2 r_hat.
-                #     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates grad p / 2,
-                #     so a column at rest settles at twice its hydrostatic pressure, and it over-pushes
-                #     low-density surface particles, which gains energy in a dam break
-                fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr
-                f_pressure_x += fp * r_hat_x
-                f_pressure_y += fp * r_hat_y
-                # [7] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc, lap W_visc = 40/(pi h^5) (h - r)
-                fv = P.viscosity_coef / rhoj * hr
-                f_viscosity_x += fv * (vk_x - vi_x)
-                f_viscosity_y += fv * (vk_y - vi_y)
-    # [8] a_i = f_pressure + f_viscosity / rho_i + g (f_pressure is already per unit mass)
-    a_x = f_pressure_x + f_viscosity_x / rhoi + P.gravity[0]
-    a_y = f_pressure_y + f_viscosity_y / rhoi + P.gravity[1]
-    # [9] store
-    particle_a[i, 0] = a_x
-    particle_a[i, 1] = a_y
+                    r_hat_z = f32(0.0)
+                    if fx:
+                        r_hat_x, r_hat_y, r_hat_z = f32(1.0) if wall_x == P.box_min[0] else f32(-1.0), f32(0.0), f32(0.0)
+                    if fy:
+                        r_hat_x, r_hat_y, r_hat_z = f32(0.0), f32(1.0) if wall_y == P.box_min[1] else f32(-1.0), f32(0.0)
+                    if fz:
+                        r_hat_x, r_hat_y, r_hat_z = f32(0.0), f32(0.0), f32(1.0) if wall_z == P.box_min[2] else f32(-1.0)
+                    if rlen > f32(0.0):
+                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
+                    #     conserves momentum and energy with summation density (Monaghan 1992).
+                    #     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
+                    #     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
+                    fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr
+                    f_pressure_x += fp * r_hat_x
+                    f_pressure_y += fp * r_hat_y
+                    f_pressure_z += fp * r_hat_z
+                    # [8] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc; an image's velocity is
+                    #     mirrored on its flipped axes
+                    if VISCOSITY:
+                        vj_x = particle_v[j, 0]
+                        vj_y = particle_v[j, 1]
+                        vj_z = particle_v[j, 2]
+                        vk_x = -vj_x if fx else vj_x
+                        vk_y = -vj_y if fy else vj_y
+                        vk_z = -vj_z if fz else vj_z
+                        fv = P.viscosity_coef / rhoj * hr
+                        f_viscosity_x += fv * (vk_x - vi_x)
+                        f_viscosity_y += fv * (vk_y - vi_y)
+                        f_viscosity_z += fv * (vk_z - vi_z)
+                    # [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
+                    #     particles only: the walls are not wetted
+                    if SURFACE_TENSION and image == 0:
+                        q = P.h2 - r2
+                        f_cohesion_x += q * q * q * r_x
+                        f_cohesion_y += q * q * q * r_y
+                        f_cohesion_z += q * q * q * r_z
+        # [10] a_i = f_pressure + f_viscosity / rho_i + cohesion + g (f_pressure is per unit mass)
+        a_x = f_pressure_x
+        a_y = f_pressure_y
+        a_z = f_pressure_z
+        if VISCOSITY:
+            a_x += f_viscosity_x / rhoi
+            a_y += f_viscosity_y / rhoi
+            a_z += f_viscosity_z / rhoi
+        if SURFACE_TENSION:
+            a_x += P.cohesion_coef * f_cohesion_x
+            a_y += P.cohesion_coef * f_cohesion_y
+            a_z += P.cohesion_coef * f_cohesion_z
+        if GRAVITY:
+            a_x += P.gravity[0]
+            a_y += P.gravity[1]
+            a_z += P.gravity[2]
+        # [11] store
+        particle_a[i, 0] = a_x
+        particle_a[i, 1] = a_y
+        particle_a[i, 2] = a_z
+        particle_a[i, 3] = f32(0.0)
 
-
-compute_forces = launcher(compute_forces_main)
+    return launcher(compute_forces_main)

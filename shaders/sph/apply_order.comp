@@ -1,0 +1,26 @@
+#version 460
+// Copy the sorted position, velocity and id back into the particle buffers: from here on in
+// the step, particles of one cell are contiguous (cell c holds cell_start[c] .. + count).
+// One invocation per particle.
+// Mirror: sphcore/sph/apply_order.py (same names, same statement order, same step labels).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+
+layout(std430, binding = 0) writeonly buffer ParticleX { vec4 particle_x[]; };
+layout(std430, binding = 1) writeonly buffer ParticleV { vec4 particle_v[]; };
+layout(std430, binding = 5) writeonly buffer ParticleId { uint particle_id[]; };
+layout(std430, binding = 11) readonly buffer ScratchX { vec4 scratch_x[]; };
+layout(std430, binding = 12) readonly buffer ScratchV { vec4 scratch_v[]; };
+layout(std430, binding = 13) readonly buffer ScratchId { uint scratch_id[]; };
+
+void main() {
+    // [1] one invocation per particle
+    uint k = gl_GlobalInvocationID.x;
+    if (k >= P.n) return;
+    // [2] copy back
+    particle_x[k] = scratch_x[k];
+    particle_v[k] = scratch_v[k];
+    particle_id[k] = scratch_id[k];
+}

@@ -1,0 +1,33 @@
+#version 460
+// Start of each cell's run in the sorted order: the number of particles in all cells before
+// it, read from the HistoPyramid top-down (seed 2). One invocation per cell.
+// Mirror: sphcore/sph/cell_offsets.py (same names, same statement order, same step labels).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+#include "cells.glsl"
+
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) writeonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 14) buffer GridStatus { uint grid_status[]; };
+
+void main() {
+    // [1] one invocation per cell
+    uint c = gl_GlobalInvocationID.x;
+    if (c >= P.cell_total) return;
+    // [2] from the top level down: at level l the cell's ancestor is c / 8^l, and every
+    //     sibling before that ancestor (same parent) counts particles that come before c
+    uint start = 0u;
+    for (int l = int(P.levels) - 1; l >= 0; --l) {
+        uint ancestor = c >> (3u * uint(l));
+        uint offset = level_offset(uint(l));
+        for (uint s = ancestor & ~7u; s < ancestor; ++s) {
+            start += cell_pyramid[offset + s];
+        }
+    }
+    cell_start[c] = start;
+    // [3] the top of the pyramid must hold every particle exactly once; a mismatch is counted
+    //     in grid_status[2] (an overflow or a lost particle: never silently accepted)
+    if (c == 0u && cell_pyramid[level_offset(P.levels)] != P.n) atomicAdd(grid_status[2], 1u);
+}

@@ -1,0 +1,50 @@
+// Neighbour-grid helpers shared by the grid and SPH shaders.
+// Mirror: sphcore/sph/cells.py (same names, same statements).
+//
+// Cells are cubes of side 1 / P.inv_cell (h, padded by 2^-12 so that rounding in the cell
+// coordinate can never put two particles closer than h more than one cell apart), counted from
+// P.box_min. With walls the grid covers the box; in an open domain cell coordinates wrap modulo
+// P.grid_dim (spatial hashing, seed 2): far-apart cells share a bucket, which is harmless because
+// every pair's distance is tested against h. The HistoPyramid over the per-cell counts lives in
+// one buffer, level 0 (the counts) first; each level above holds the sums of 8 consecutive nodes.
+
+const int CELL_LIMIT = 1 << 24;  // |cell coordinate| beyond this: outside the hashed range
+
+// Cell coordinates of point x, clamped to +-CELL_LIMIT (z = 0 in 2D).
+ivec3 cell_of(vec3 x) {
+    vec3 f = floor((x - P.box_min) * P.inv_cell);
+    f = clamp(f, vec3(-float(CELL_LIMIT)), vec3(float(CELL_LIMIT)));
+    if (DIM == 2u) f.z = 0.0;
+    return ivec3(f);
+}
+
+// Index of cell c in the grid: -1 outside the box (walls), else wrapped into the period (open).
+int cell_index(ivec3 c) {
+    ivec3 d = ivec3(P.grid_dim);
+    if (WALLS) {
+        if (c.x < 0 || c.y < 0 || c.z < 0 || c.x >= d.x || c.y >= d.y || c.z >= d.z) return -1;
+    } else {
+        // c + d * (CELL_LIMIT / d + 2) >= 0, so % acts on non-negative numbers only
+        c = (c + d * (CELL_LIMIT / d + 2)) % d;
+    }
+    return (c.z * d.y + c.y) * d.x + c.x;
+}
+
+// Offset of HistoPyramid level l in the pyramid buffer, and its node count.
+uint level_offset(uint l) {
+    uint offset = 0u;
+    uint size = P.cell_total;
+    for (uint k = 0u; k < l; ++k) {
+        offset += size;
+        size = (size + 7u) / 8u;
+    }
+    return offset;
+}
+
+uint level_size(uint l) {
+    uint size = P.cell_total;
+    for (uint k = 0u; k < l; ++k) {
+        size = (size + 7u) / 8u;
+    }
+    return size;
+}

@@ -1,0 +1,33 @@
+#version 460
+// Order each cell's particles by their current index (insertion sort of the cell's run), so
+// the sorted order is (cell, index) whatever order the atomic slots were taken in: Vulkan and
+// numba produce the same permutation bit for bit. One invocation per cell; a cell holds about
+// (h / spacing)^dim particles, so the sort is short (quadratic only if all crowd one cell).
+// Mirror: sphcore/sph/sort_cells.py (same names, same statement order, same step labels).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 10) buffer SortedIndex { uint sorted_index[]; };
+
+void main() {
+    // [1] one invocation per cell
+    uint c = gl_GlobalInvocationID.x;
+    if (c >= P.cell_total) return;
+    // [2] the cell's run in the sorted order
+    uint start = cell_start[c];
+    uint count = cell_pyramid[c];
+    // [3] insertion sort, ascending particle index
+    for (uint k = 1u; k < count; ++k) {
+        uint key = sorted_index[start + k];
+        uint m = k;
+        while (m > 0u && sorted_index[start + m - 1u] > key) {
+            sorted_index[start + m] = sorted_index[start + m - 1u];
+            m -= 1u;
+        }
+        sorted_index[start + m] = key;
+    }
+}

@@ -1,0 +1,27 @@
+"""Copy the sorted position, velocity and id back into the particle buffers: from here on in
+the step, particles of one cell are contiguous (cell c holds cell_start[c] .. + count).
+One invocation per particle.
+
+Mirror of shaders/sph/apply_order.comp: same names, same statement order, same step labels.
+"""
+from functools import lru_cache
+
+from numba import njit
+
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def apply_order(spec):
+    @njit
+    def apply_order_main(k, params, particle_x, particle_v, particle_id, scratch_x, scratch_v, scratch_id):
+        P = params[0]
+        # [1] one invocation per particle
+        if k >= P.n:
+            return
+        # [2] copy back
+        particle_x[k, :] = scratch_x[k, :]
+        particle_v[k, :] = scratch_v[k, :]
+        particle_id[k] = scratch_id[k]
+
+    return launcher(apply_order_main)

@@ -1,0 +1,37 @@
+"""Start of each cell's run in the sorted order: the number of particles in all cells before
+it, read from the HistoPyramid top-down (seed 2). One invocation per cell.
+
+Mirror of shaders/sph/cell_offsets.comp: same names, same statement order, same step labels.
+The atomic on grid_status is made by invocation 0 alone, so a parallel launch is exact.
+"""
+from functools import lru_cache
+
+from numba import njit
+
+from sphcore.sph.cells import level_offset
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def cell_offsets(spec):
+    @njit
+    def cell_offsets_main(c, params, cell_pyramid, cell_start, grid_status):
+        P = params[0]
+        # [1] one invocation per cell
+        if c >= P.cell_total:
+            return
+        # [2] from the top level down: at level l the cell's ancestor is c / 8^l, and every
+        #     sibling before that ancestor (same parent) counts particles that come before c
+        start = 0
+        for l in range(int(P.levels) - 1, -1, -1):
+            ancestor = c >> (3 * l)
+            offset = level_offset(P, l)
+            for s in range(ancestor & ~7, ancestor):
+                start += cell_pyramid[offset + s]
+        cell_start[c] = start
+        # [3] the top of the pyramid must hold every particle exactly once; a mismatch is counted
+        #     in grid_status[2] (an overflow or a lost particle: never silently accepted)
+        if c == 0 and cell_pyramid[level_offset(P, P.levels)] != P.n:
+            grid_status[2] += 1
+
+    return launcher(cell_offsets_main)

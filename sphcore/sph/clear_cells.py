@@ -1,0 +1,23 @@
+"""Zero the per-cell particle counts (HistoPyramid level 0), one invocation per cell.
+
+Mirror of shaders/sph/clear_cells.comp: same names, same statement order, same step labels.
+"""
+from functools import lru_cache
+
+from numba import njit
+
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def clear_cells(spec):
+    @njit
+    def clear_cells_main(c, params, cell_pyramid):
+        P = params[0]
+        # [1] one invocation per cell
+        if c >= P.cell_total:
+            return
+        # [2] no particle counted yet
+        cell_pyramid[c] = 0
+
+    return launcher(clear_cells_main)

@@ -1,0 +1,28 @@
+"""Copy position, velocity and id into sorted order (scratch buffers); apply_order copies them
+back. One invocation per sorted position.
+
+Mirror of shaders/sph/gather_particles.comp: same names, same statement order, same step labels.
+"""
+from functools import lru_cache
+
+from numba import njit
+
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def gather_particles(spec):
+    @njit
+    def gather_particles_main(k, params, particle_x, particle_v, particle_id, sorted_index,
+                              scratch_x, scratch_v, scratch_id):
+        P = params[0]
+        # [1] one invocation per sorted position
+        if k >= P.n:
+            return
+        # [2] fetch the particle that goes there
+        j = sorted_index[k]
+        scratch_x[k, :] = particle_x[j, :]
+        scratch_v[k, :] = particle_v[j, :]
+        scratch_id[k] = particle_id[j]
+
+    return launcher(gather_particles_main)

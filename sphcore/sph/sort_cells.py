@@ -1,0 +1,34 @@
+"""Order each cell's particles by their current index (insertion sort of the cell's run), so
+the sorted order is (cell, index) whatever order the atomic slots were taken in: Vulkan and
+numba produce the same permutation bit for bit. One invocation per cell.
+
+Mirror of shaders/sph/sort_cells.comp: same names, same statement order, same step labels.
+"""
+from functools import lru_cache
+
+from numba import njit
+
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def sort_cells(spec):
+    @njit
+    def sort_cells_main(c, params, cell_pyramid, cell_start, sorted_index):
+        P = params[0]
+        # [1] one invocation per cell
+        if c >= P.cell_total:
+            return
+        # [2] the cell's run in the sorted order
+        start = cell_start[c]
+        count = cell_pyramid[c]
+        # [3] insertion sort, ascending particle index
+        for k in range(1, count):
+            key = sorted_index[start + k]
+            m = k
+            while m > 0 and sorted_index[start + m - 1] > key:
+                sorted_index[start + m] = sorted_index[start + m - 1]
+                m -= 1
+            sorted_index[start + m] = key
+
+    return launcher(sort_cells_main)
