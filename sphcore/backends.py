@@ -43,6 +43,7 @@ BUFFERS = {
     "scratch_v": (np.float32, 4, "particles"),
     "scratch_id": (np.uint32, 1, "particles"),
     "grid_status": (np.uint32, 1, 4),
+    "particle_neighbours": (np.uint32, 2, "particles"),
 }
 # grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
 # [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
@@ -63,7 +64,8 @@ STAGES = {
     "apply_order": (apply_order, "particles", ("particle_x", "particle_v", "particle_id", "scratch_x",
                                                "scratch_v", "scratch_id")),
     "compute_density": (compute_density, "particles", ("particle_x", "particle_rho", "particle_p",
-                                                       "cell_pyramid", "cell_start")),
+                                                       "cell_pyramid", "cell_start", "particle_id",
+                                                       "particle_neighbours")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "cell_pyramid", "cell_start")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a")),
@@ -117,7 +119,7 @@ def in_particle_order(state, dim=None):
     for name, (_, c, length) in BUFFERS.items():
         if length == "particles" and name.startswith("particle_"):
             values = state[name][order]
-            out[name] = values[:, :dim] if c > 1 and dim else values
+            out[name] = values[:, :dim] if c == 4 and dim else values
     return out
 
 

@@ -253,7 +253,7 @@ class Scene:
         return Spec(DIM=self.dim, GRID=physics["neighbour_search"] == "grid",
                     WALLS=self["domain.boundary"] == "walls", TAIT=physics["equation_of_state"] == "tait",
                     VISCOSITY=physics["viscosity"], SURFACE_TENSION=physics["surface_tension"],
-                    GRAVITY=physics["gravity"])
+                    GRAVITY=physics["gravity"], NEIGHBOUR_STATS=False)
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""

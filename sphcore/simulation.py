@@ -66,7 +66,7 @@ class Simulation:
         if status[0]:
             where = ("outside the box" if self.scene["domain.boundary"] == "walls"
                      else f"beyond the hashed range (+-2^24 cells of {self.scene.h:g} m)")
-            raise SimulationError(f"{steps}: {int(status[0])} particle positions were {where} or not finite "
+            raise SimulationError(f"{steps}: {int(status[0])} particle position(s) were {where} or not finite "
                                   f"(the first: particle {int(status[1])}); likely cause: a blow-up "
                                   f"(time.dt = {self.scene['time.dt']:g} s, estimated bound {stable_dt(self.scene)[0]:.3g} s)")
         if status[2]:

@@ -7,7 +7,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 import numpy as np
 import pytest
 
-from sphcore.backends import empty_state, make_backend, plan
+from sphcore.backends import empty_state, in_particle_order, make_backend, plan
 
 BACKENDS = ["numba", "vulkan"]
 
@@ -25,17 +25,17 @@ def vulkan_or_skip():
 
 @pytest.fixture
 def open_backend():
-    """open_backend(name, params, state, stages) -> backend with validation layers on (Vulkan).
+    """open_backend(name, params, state, stages, spec) -> backend with validation layers on (Vulkan).
 
     At teardown, asserts that the validation layers reported no error.
     """
     opened = []
 
-    def open_(name, params, state, stages, **options):
+    def open_(name, params, state, stages, spec, **options):
         if name == "vulkan":
             vulkan_or_skip()
             options.setdefault("validation", True)
-        backend = make_backend(name, params, state, stages, **options)
+        backend = make_backend(name, params, state, stages, spec, **options)
         opened.append(backend)
         return backend
 
@@ -47,11 +47,17 @@ def open_backend():
 
 
 def scene_state(scene, jitter=0.0, seed=0):
-    """Initial state of `scene`, positions jittered by up to `jitter` * spacing (seeded)."""
+    """(state, params, stages, spec) of `scene`, positions jittered by up to `jitter` * spacing (seeded)."""
     x = scene.initial_positions()
     if jitter:
         rng = np.random.default_rng(seed)
         x = x + (rng.uniform(-1, 1, x.shape) * jitter * scene["fluid.spacing"]).astype(np.float32)
-    state = empty_state(len(x))
-    state["particle_x"][:] = x
-    return state, scene.params(len(x)), plan(scene)
+    params = scene.params(len(x))
+    state = empty_state(params)
+    state["particle_x"][:, :scene.dim] = x
+    return state, params, plan(scene), scene.spec
+
+
+def particles(backend, dim):
+    """A backend's per-particle arrays in particle-id order, vectors of `dim` components."""
+    return in_particle_order(backend.read(), dim)

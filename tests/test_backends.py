@@ -1,7 +1,7 @@
 """The Vulkan runner against the numba oracle: one dispatch of each shader, and whole scenes."""
 import numpy as np
 import pytest
-from conftest import scene_state
+from conftest import particles, scene_state
 
 from sphcore.cli import scene_path
 from sphcore.scene import Scene
@@ -13,20 +13,32 @@ from sphcore.scene import Scene
 STAGE_RTOL = 1e-5
 
 
-@pytest.mark.parametrize("scene_name", ["dam_break_2d", "cube_drop_2d"])
+# The atomic slots taken in count_cells depend on GPU scheduling; sort_cells removes that
+# dependence. Until it has run, particle_slot and sorted_index may legitimately differ.
+SCHEDULE_DEPENDENT = {"count_cells": {"particle_slot"}, "reduce_cells": {"particle_slot"},
+                      "cell_offsets": {"particle_slot"}, "scatter_particles": {"particle_slot", "sorted_index"}}
+
+
+@pytest.mark.parametrize("scene_name", ["dam_break_2d", "cube_drop_2d", "dam_break_3d", "droplet_3d"])
 def test_each_shader_once_agrees(open_backend, scene_name):
+    """Integers (cells, counts, pyramid, offsets, sorted order, ids) bitwise; floats within STAGE_RTOL."""
     scene = Scene.load(scene_path(scene_name))
-    state, params, stages = scene_state(scene, jitter=0.3, seed=3)
-    state["particle_v"][:] = np.random.default_rng(4).normal(0, 1, state["particle_v"].shape)
-    cpu = open_backend("numba", params, state, stages)
-    gpu = open_backend("vulkan", params, state, stages)
+    state, params, stages, spec = scene_state(scene, jitter=0.3, seed=3)
+    state["particle_v"][:, :scene.dim] = np.random.default_rng(4).normal(0, 1, (len(state["particle_v"]), scene.dim))
+    cpu = open_backend("numba", params, state, stages, spec)
+    gpu = open_backend("vulkan", params, state, stages, spec)
     for stage in stages:
         cpu.run_stage(stage)
         gpu.run_stage(stage)
         a, b = cpu.read(), gpu.read()
         for name in a:
-            scale = max(float(np.abs(a[name]).max()), 1e-30)
-            err = float(np.abs(a[name] - b[name]).max())
+            if name in SCHEDULE_DEPENDENT.get(stage.name, ()):
+                continue
+            if a[name].dtype.kind == "u":
+                assert np.array_equal(a[name], b[name]), f"after {stage}: {name} differs"
+                continue
+            scale = max(float(np.abs(a[name]).max(initial=0.0)), 1e-30)
+            err = float(np.abs(a[name] - b[name]).max(initial=0.0))
             assert err <= STAGE_RTOL * scale, f"after {stage}: {name} differs by {err:g} (scale {scale:g})"
 
 
@@ -38,20 +50,21 @@ STEPS = 100
 @pytest.mark.parametrize("scene_name", ["dam_break_2d", "cube_drop_2d"])
 def test_scene_100_steps_agree_and_keep_invariants(open_backend, scene_name):
     scene = Scene.load(scene_path(scene_name))
-    state, params, stages = scene_state(scene)
+    state, params, stages, spec = scene_state(scene)
+    x0 = state["particle_x"][:, :2]
     results = {}
     for name in ("numba", "vulkan"):
-        backend = open_backend(name, params, state, stages)
+        backend = open_backend(name, params, state, stages, spec)
         backend.step(STEPS)
-        results[name] = backend.read()
-    n = len(state["particle_x"])
+        results[name] = particles(backend, 2)
+    n = len(x0)
     lo, hi = np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])
     for name, s in results.items():
         assert all(len(v) == n for v in s.values()), f"{name}: particle count changed"
         assert all(np.isfinite(v).all() for v in s.values()), f"{name}: non-finite values"
         x = s["particle_x"]
         assert ((x >= lo) & (x <= hi)).all(), f"{name}: particles outside the box"
-        moved = np.abs(x - state["particle_x"]).max()
+        moved = np.abs(x - x0).max()
         assert moved > 1e-4, f"{name}: nothing moved in {STEPS} steps"
     gap = np.abs(results["numba"]["particle_x"] - results["vulkan"]["particle_x"]).max()
     assert gap <= 1e-3 * scene["fluid.spacing"], f"positions differ by {gap:g} m after {STEPS} steps"

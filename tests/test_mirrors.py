@@ -45,7 +45,29 @@ def test_each_file_names_its_partner(shader):
 def test_every_mirror_has_a_shader():
     mirrors = [p for p in (ROOT / "sphcore" / "sph").glob("*.py") if p.name != "__init__.py"]
     for mirror in mirrors:
-        assert (SHADER_DIR / "sph" / f"{mirror.stem}.comp").is_file(), f"{mirror} mirrors no shader"
+        partners = [SHADER_DIR / "sph" / f"{mirror.stem}{suffix}" for suffix in (".comp", ".glsl")]
+        assert any(p.is_file() for p in partners), f"{mirror} mirrors no shader"
+
+
+def test_included_helpers_have_mirrors_with_the_same_functions():
+    for include in SHADER_DIR.rglob("*.glsl"):
+        functions = re.findall(r"^\w+\s+(\w+)\s*\([^;]*\)\s*\{", include.read_text(), re.M)
+        if not functions:
+            continue  # a block of declarations (params.glsl, constants.glsl), parsed by sphcore.params
+        mirror = mirror_of(include)
+        assert mirror.is_file(), f"{include} has no mirror at {mirror}"
+        text = mirror.read_text()
+        assert f"shaders/{include.relative_to(SHADER_DIR)}" in text
+        for name in functions:
+            assert f"def {name}(" in text, f"{include.name}: function {name} has no mirror in {mirror.name}"
+
+
+def test_specialization_constants_are_parsed_from_the_shaders():
+    from sphcore.params import SPEC_CONSTANTS, Spec
+    assert list(Spec._fields) == list(SPEC_CONSTANTS)
+    ids = [cid for cid, _ in SPEC_CONSTANTS.values()]
+    assert len(set(ids)) == len(ids) and 0 not in ids, "constant 0 is the work-group size"
+    assert {"DIM", "GRID", "WALLS", "TAIT", "VISCOSITY", "SURFACE_TENSION", "GRAVITY"} <= set(SPEC_CONSTANTS)
 
 
 def test_parameter_layout_follows_std430():

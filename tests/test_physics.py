@@ -1,7 +1,7 @@
 """Scenes against physics: a column at rest, conservation, extremes."""
 import numpy as np
 import pytest
-from conftest import BACKENDS, scene_state
+from conftest import BACKENDS, particles, scene_state
 
 from sphcore.scene import Scene
 
@@ -19,10 +19,10 @@ def column(width=0.1, height=0.2, **fluid):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_resting_column_is_hydrostatic(open_backend, backend):
     scene = column()
-    state, params, stages = scene_state(scene)
-    sim = open_backend(backend, params, state, stages)
+    state, params, stages, spec = scene_state(scene)
+    sim = open_backend(backend, params, state, stages, spec)
     sim.step(4000)  # 0.4 s: several sound crossings (c = 20 m/s, 0.2 m) and viscous settling
-    s = sim.read()
+    s = particles(sim, 2)
     x, rho, p, v = s["particle_x"], s["particle_rho"], s["particle_p"], s["particle_v"]
     assert np.abs(v).max() < 0.1, "column still moving"
     surface = np.sort(x[:, 1])[-10:].mean()  # mean height of the top row
@@ -48,13 +48,13 @@ def zero_gravity_blob(**fluid):
 def test_momentum_is_conserved_away_from_walls(open_backend, backend):
     """Pressure and viscosity forces are antisymmetric in (i, j): total momentum stays constant."""
     scene = zero_gravity_blob(viscosity=2.0)
-    state, params, stages = scene_state(scene, jitter=0.4, seed=5)
+    state, params, stages, spec = scene_state(scene, jitter=0.4, seed=5)
     rng = np.random.default_rng(6)
-    state["particle_v"][:] = rng.normal(0, 0.2, state["particle_v"].shape)
-    p0 = state["particle_v"].astype(np.float64).sum(axis=0)
-    sim = open_backend(backend, params, state, stages)
+    state["particle_v"][:, :2] = rng.normal(0, 0.2, (len(state["particle_v"]), 2))
+    p0 = state["particle_v"][:, :2].astype(np.float64).sum(axis=0)
+    sim = open_backend(backend, params, state, stages, spec)
     sim.step(200)
-    s = sim.read()
+    s = particles(sim, 2)
     assert (np.abs(s["particle_x"] - 0.5) < 0.5 - scene.h).all(), "the blob reached a wall"
     p1 = s["particle_v"].astype(np.float64).sum(axis=0)
     # float32 velocities of ~0.2 m/s summed over 400 particles and 200 steps: rounding ~1e-4
@@ -67,16 +67,17 @@ def test_momentum_is_conserved_away_from_walls(open_backend, backend):
 def test_walls_and_corners_are_handled_in_one_step(open_backend, backend):
     """A particle past a corner is put back on both walls and both normal speeds reversed in one
     step (seed 1's else-if chain handled one wall per step)."""
-    from sphcore.backends import empty_state
+    from sphcore.backends import Stage, empty_state
 
     scene = zero_gravity_blob()
     corners = np.array([[0.001, 0.001], [0.999, 0.001], [0.001, 0.999], [0.999, 0.999], [0.5, 0.001]], np.float32)
-    state = empty_state(len(corners))
-    state["particle_x"][:] = corners
-    state["particle_v"][:] = 20.0 * np.sign(corners - 0.5)  # outward on both axes (x = 0.5: +x)
-    sim = open_backend(backend, scene.params(len(corners)), state, ["integrate"])
+    params = scene.params(len(corners))
+    state = empty_state(params)
+    state["particle_x"][:, :2] = corners
+    state["particle_v"][:, :2] = 20.0 * np.sign(corners - 0.5)  # outward on both axes (x = 0.5: +x)
+    sim = open_backend(backend, params, state, [Stage("integrate")], scene.spec)
     sim.step(1)
-    s = sim.read()
+    s = particles(sim, 2)
     x, v = s["particle_x"], s["particle_v"]
     outward = np.sign(corners - 0.5)
     hit = np.abs(corners - 0.5) > 0.49  # the axes on which each particle crosses a wall
@@ -88,13 +89,13 @@ def test_walls_and_corners_are_handled_in_one_step(open_backend, backend):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_particles_thrown_at_the_walls_stay_inside_and_finite(open_backend, backend):
     scene = zero_gravity_blob()
-    state, params, stages = scene_state(scene)
-    direction = state["particle_x"] - 0.5
-    state["particle_v"][:] = 40.0 * direction / np.linalg.norm(direction, axis=1, keepdims=True)
-    sim = open_backend(backend, params, state, stages)
+    state, params, stages, spec = scene_state(scene)
+    direction = state["particle_x"][:, :2] - 0.5
+    state["particle_v"][:, :2] = 40.0 * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    sim = open_backend(backend, params, state, stages, spec)
     for _ in range(10):
         sim.step(20)
-        s = sim.read()
+        s = particles(sim, 2)
         assert all(np.isfinite(v).all() for v in s.values())
         assert ((s["particle_x"] >= 0.0) & (s["particle_x"] <= 1.0)).all()
     assert (np.abs(s["particle_x"] - 0.5) > 0.5 - scene.h).any(), "no particle reached a wall"

@@ -53,6 +53,8 @@ class Buffer:
         data = np.ascontiguousarray(array)
         if data.nbytes > self.nbytes:
             raise ValueError(f"{self.name}: {data.nbytes} bytes do not fit in {self.nbytes}")
+        if data.nbytes == 0:
+            return
         if self.host_visible:
             self.ctx._write_mapped(self.memory, data)
         else:
@@ -63,6 +65,8 @@ class Buffer:
 
     def read(self, dtype, shape):
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        if nbytes == 0:
+            return np.zeros(shape, dtype)
         if self.host_visible:
             return self.ctx._read_mapped(self.memory, nbytes).view(dtype).reshape(shape)
         staging = self.ctx._staging(nbytes)

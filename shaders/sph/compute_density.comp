@@ -13,6 +13,17 @@ layout(std430, binding = 3) writeonly buffer ParticleRho { float particle_rho[];
 layout(std430, binding = 4) writeonly buffer ParticleP { float particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
+layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
+
+// Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
+uint neighbour_hash(uint id, uint image) {
+    uint h = (id * 8u + image) * 0x9E3779B1u;
+    h ^= h >> 15;
+    h *= 0x85EBCA77u;
+    h ^= h >> 13;
+    return h;
+}
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
@@ -30,10 +41,13 @@ void main() {
     if (WALLS && abs(xi.x - wall.x) < P.h) mirrored |= 1u;
     if (WALLS && abs(xi.y - wall.y) < P.h) mirrored |= 2u;
     if (WALLS && DIM == 3u && abs(xi.z - wall.z) < P.h) mirrored |= 4u;
-    // [4] sum (h^2 - r^2)^3 over every particle and image within h, self included. Image
+    // [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
+    //     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
     //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
     //     is within h of xi's own image xm, so the cells searched are those around xm.
     float sum_w = 0.0;
+    uint found = 0u;
+    uint fingerprint = 0u;
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
         bool fx = (image & 1u) != 0u;
@@ -64,6 +78,10 @@ void main() {
                 if (r2 < P.h2) {
                     float q = P.h2 - r2;
                     sum_w += q * q * q;
+                    if (NEIGHBOUR_STATS) {
+                        found += 1u;
+                        fingerprint += neighbour_hash(particle_id[j], image);
+                    }
                 }
             }
         }
@@ -85,4 +103,5 @@ void main() {
     // [8] store
     particle_rho[i] = rho;
     particle_p[i] = p;
+    if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
 }

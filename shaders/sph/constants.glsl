@@ -8,3 +8,5 @@ layout(constant_id = 4) const bool TAIT = false;         // Tait equation of sta
 layout(constant_id = 5) const bool VISCOSITY = true;     // Mueller's viscosity term
 layout(constant_id = 6) const bool SURFACE_TENSION = false; // cohesion (Becker & Teschner 2007)
 layout(constant_id = 7) const bool GRAVITY = true;       // the gravity term
+layout(constant_id = 8) const bool NEIGHBOUR_STATS = false; // compute_density records each particle's
+                                                         // neighbour count and a fingerprint of the set

@@ -15,13 +15,24 @@ from sphcore.workgroups import launcher
 f32 = np.float32
 
 
+@njit
+def neighbour_hash(id, image):
+    """Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set."""
+    h = ((id * 8 + image) * 0x9E3779B1) & 0xFFFFFFFF
+    h ^= h >> 15
+    h = (h * 0x85EBCA77) & 0xFFFFFFFF
+    h ^= h >> 13
+    return h
+
+
 @lru_cache(maxsize=None)
 def compute_density(spec):
-    DIM, GRID, WALLS, TAIT = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT
+    DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
     cell_of, cell_index = cells(spec)
 
     @njit
-    def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start):
+    def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start,
+                             particle_id, particle_neighbours):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -43,10 +54,13 @@ def compute_density(spec):
             mirrored |= 2
         if WALLS and DIM == 3 and abs(xi_z - wall_z) < P.h:
             mirrored |= 4
-        # [4] sum (h^2 - r^2)^3 over every particle and image within h, self included. Image
+        # [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
+        #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
         #     is within h of xi's own image xm, so the cells searched are those around xm.
         sum_w = f32(0.0)
+        found = 0
+        fingerprint = 0
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
@@ -83,6 +97,9 @@ def compute_density(spec):
                     if r2 < P.h2:
                         q = P.h2 - r2
                         sum_w += q * q * q
+                        if NEIGHBOUR_STATS:
+                            found += 1
+                            fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
         # [6] rho_i = m sum_j W_poly6(r_ij, h)
         rho = P.density_coef * sum_w
         # [7] equation of state, clamped at 0 so that the free surface does not pull (tensile
@@ -99,5 +116,8 @@ def compute_density(spec):
         # [8] store
         particle_rho[i] = rho
         particle_p[i] = p
+        if NEIGHBOUR_STATS:
+            particle_neighbours[i, 0] = found
+            particle_neighbours[i, 1] = fingerprint
 
     return launcher(compute_density_main)
