@@ -1,7 +1,10 @@
-"""Steps per second of the all-pairs 2D SPH step against particle count, one backend per run.
+"""Steps per second of the SPH step against particle count, one backend per run.
 
-Each case is a square block of N particles (the first N of a ceil(sqrt(N))^2 lattice at the
-default spacing), half its side from the side walls and 10 m above the floor, gravity on. After a
+--dim 2 --search all_pairs (seed 1's case): a square block of N particles (the first N of a
+ceil(sqrt(N))^2 lattice), half its side from the side walls and 10 m above the floor.
+--dim 3 --search grid (seed 2's case, the default): a 3D dam break, the first N of a
+ceil(cbrt(N))^3 block of water in the corner of a tank two blocks long, Tait equation of state,
+h = 2 dx (about 33 neighbours per particle), every step re-sorting the particles by cell. After a
 warm-up (numba compiles, Vulkan records its command buffer) whole chunks of steps are timed
 until at least --min-seconds have passed. Vulkan's step() returns only after the fence of
 its last submit, so the timer brackets finished GPU work.
@@ -29,6 +32,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 # seed 1's table: frames/s of its Vulkan SPH on a GTX 1070, by particle count
 SEED1_GTX1070_FPS = {5000: 486.8, 10000: 271.8, 20000: 115.95, 30000: 59.15,
                      40000: 39.7, 50000: 35.75, 60000: 28.4}
+# seed 2's table 6.1: ms per SPH step, single-thread CPU (Core 2 Q6600) / GPU (GTX 560)
+SEED2_MS = {4096: (26.0, 2.2), 8192: (70.2, 3.2), 16384: (227.2, 5.9), 32768: (494.1, 10.2), 65536: (943.2, 20.2)}
+COUNTS_3D = [4096, 8192, 16384, 32768, 65536, 131072, 262144]
 
 
 def ints(text):
@@ -38,36 +44,45 @@ def ints(text):
 DROP_M = 10.0  # free fall before the floor: 1.43 s = 14000 steps of dt = 1e-4 s
 
 
-def make_case(n, spacing=0.01):
-    """(scene, positions) for a block of exactly n particles, DROP_M above the floor of a box."""
+def make_case(n, dim=2, search="all_pairs", spacing=0.01):
+    """(scene, positions) for exactly n particles: see the module docstring."""
     from sphcore.scene import Scene
-    side = math.ceil(math.sqrt(n))
-    block = side * spacing
-    x0, y0 = block / 2, DROP_M  # block half its side from the side walls and from the ceiling
-    scene = Scene.from_dict({
-        "name": f"bench_{n}",
-        "domain": {"box_min": [0.0, 0.0], "box_max": [2 * block, y0 + 1.5 * block]},
-        "fluid": {"spacing": spacing,
-                  "blocks": [{"min": [x0, y0], "max": [x0 + block + spacing / 2, y0 + block + spacing / 2]}]},
-        "forces": {"gravity": [0.0, -9.81]},
-    })
+    if dim == 2:
+        side = math.ceil(math.sqrt(n))
+        block = side * spacing
+        x0, y0 = block / 2, DROP_M  # block half its side from the side walls and from the ceiling
+        lo, hi = [x0, y0], [x0 + block + spacing / 2, y0 + block + spacing / 2]
+        config = {"domain": {"box_min": [0.0, 0.0], "box_max": [2 * block, y0 + 1.5 * block]},
+                  "fluid": {"smoothing_ratio": 2.5}}
+    else:
+        side = math.ceil(n ** (1 / 3) - 1e-9)
+        block = side * spacing
+        lo, hi = [0.0, 0.0, 0.0], [block + spacing / 2] * 3
+        config = {"physics": {"equation_of_state": "tait"},
+                  "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [2 * block + spacing, 1.5 * block, block + spacing]},
+                  "fluid": {"stiffness": 900.0, "viscosity": 0.5}, "time": {"dt": 5e-5}}
+    config["physics"] = {**config.get("physics", {}), "dimension": dim, "neighbour_search": search}
+    config["name"] = f"bench_{dim}d_{search}_{n}"
+    config["fluid"] = {**config["fluid"], "spacing": spacing, "blocks": [{"min": lo, "max": hi}]}
+    scene = Scene.from_dict(config)
     x = scene.initial_positions()
     assert len(x) >= n, (len(x), n)
     return scene, x[:n]
 
 
-def time_case(backend, n, local_size, steps_per_submit, min_steps, min_seconds, device=None):
+def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, min_seconds, device=None):
     from sphcore.backends import empty_state, make_backend, plan
-    scene, x = make_case(n)
-    state = empty_state(n)
-    state["particle_x"][:] = x
+    scene, x = make_case(n, dim, search)
+    params = scene.params(n)
+    state = empty_state(params)
+    state["particle_x"][:, :dim] = x
     options = {"local_size": local_size}
     if backend == "vulkan":
         options.update(steps_per_submit=steps_per_submit, device=device)
         chunk = max(steps_per_submit, min_steps // steps_per_submit * steps_per_submit)
     else:
         chunk = max(1, min_steps)
-    be = make_backend(backend, scene.params(n), state, plan(scene), **options)
+    be = make_backend(backend, params, state, plan(scene), scene.spec, **options)
     try:
         t0 = time.perf_counter()
         be.step(chunk if backend == "vulkan" else 1)  # numba compiles; vulkan records and runs once
@@ -84,13 +99,15 @@ def time_case(backend, n, local_size, steps_per_submit, min_steps, min_seconds, 
         device_name = be.ctx.device_name if backend == "vulkan" else cpu_name()
     finally:
         be.close()
-    finite = bool(np.isfinite(out["particle_x"]).all() and np.isfinite(out["particle_v"]).all())
+    xs = out["particle_x"][:, :dim]
+    finite = bool(np.isfinite(xs).all() and np.isfinite(out["particle_v"]).all())
     lo, hi = np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])
-    wall_gap = float(min((out["particle_x"] - lo).min(), (hi - out["particle_x"]).min()))
-    return device_name, {"n": n, "local_size": local_size,
+    wall_gap = float(min((xs - lo).min(), (hi - xs).min()))
+    return device_name, {"n": n, "dim": dim, "search": search, "local_size": local_size,
                          "steps_per_submit": steps_per_submit if backend == "vulkan" else None,
                          "steps": steps, "seconds": seconds, "steps_per_second": steps / seconds,
-                         "ms_per_step": 1e3 * seconds / steps, "warmup_seconds": warmup,
+                         "ms_per_step": 1e3 * seconds / steps, "particle_steps_per_second": n * steps / seconds,
+                         "warmup_seconds": warmup, "grid_status": [int(v) for v in out["grid_status"]],
                          "finite": finite, "wall_gap_m_at_end": wall_gap, "h_m": scene.h,
                          "box_max_m": [float(v) for v in hi]}
 
@@ -133,7 +150,10 @@ def versions():
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--backend", choices=["numba", "vulkan"], required=True)
-    ap.add_argument("--counts", type=ints, default=sorted(SEED1_GTX1070_FPS))
+    ap.add_argument("--dim", type=int, choices=[2, 3], default=3)
+    ap.add_argument("--search", choices=["grid", "all_pairs"], default="grid")
+    ap.add_argument("--counts", type=ints, default=None,
+                    help="particle counts (default: seed 1's for 2D all-pairs, seed 2's and up to 262,144 for 3D)")
     ap.add_argument("--steps", type=int, default=None,
                     help="steps per timed chunk (default: numba 1, vulkan 256); chunks repeat until --min-seconds")
     ap.add_argument("--min-seconds", type=float, default=1.0)
@@ -142,6 +162,8 @@ def main():
     ap.add_argument("--device", default=None, help="Vulkan device index or name substring")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
+    if args.counts is None:
+        args.counts = sorted(SEED1_GTX1070_FPS) if args.dim == 2 else COUNTS_3D
     stubbed = stub_numba_if_missing() if args.backend == "vulkan" else None
     min_steps = args.steps or (256 if args.backend == "vulkan" else 1)
     spps = args.steps_per_submit if args.backend == "vulkan" else [None]
@@ -154,21 +176,24 @@ def main():
               "env": {k: os.environ.get(k) for k in ("OMP_WAIT_POLICY", "NUMBA_THREADING_LAYER",
                                                      "NUMBA_NUM_THREADS", "VK_DRIVER_FILES")},
               "numba_stubbed": stubbed, "counts": args.counts, "min_seconds": args.min_seconds, "min_steps": min_steps,
-              "scene": {"spacing_m": 0.01, "smoothing_ratio": 2.5, "dt_s": 1e-4, "gravity": [0.0, -9.81],
-                        "layout": "first N of a ceil(sqrt(N))^2 block; box 2 blocks wide, block 10 m above the floor"},
+              "dim": args.dim, "search": args.search,
+              "scene": make_case(args.counts[0], args.dim, args.search)[0].config | {"layout": __doc__.split("\n\n")[1]},
               "results": [],
               "seed1_gtx1070_vulkan_fps": {str(k): v for k, v in SEED1_GTX1070_FPS.items()},
-              "seed1_note": "seed 1 reported frames/s of its Vulkan build on a GTX 1070"}
-    print(f"{'N':>7} {'local':>5} {'spp':>4} {'steps':>6} {'seconds':>8} {'steps/s':>10} {'ms/step':>9}"
-          f" {'seed1 fps':>9}  device", flush=True)
+              "seed1_note": "seed 1 reported frames/s of its Vulkan build on a GTX 1070 (2D, all pairs)",
+              "seed2_ms_per_step_cpu_gpu": {str(k): v for k, v in SEED2_MS.items()},
+              "seed2_note": "seed 2 table 6.1: ms per 3D step, one Core 2 Q6600 thread / GTX 560 (grid)"}
+    print(f"{'N':>8} {'local':>5} {'spp':>4} {'steps':>6} {'seconds':>8} {'steps/s':>10} {'ms/step':>9}"
+          f" {'particle-steps/s':>16} {'seed':>12}  device", flush=True)
     for n, ls, spp in itertools.product(args.counts, args.local_size, spps):
-        device, row = time_case(args.backend, n, ls, spp, min_steps, args.min_seconds, args.device)
+        device, row = time_case(args.backend, n, args.dim, args.search, ls, spp, min_steps, args.min_seconds,
+                                args.device)
         record["device"] = device
         record["results"].append(row)
-        seed = SEED1_GTX1070_FPS.get(n)
-        print(f"{n:>7} {ls:>5} {spp or '-':>4} {row['steps']:>6} {row['seconds']:>8.3f} "
-              f"{row['steps_per_second']:>10.2f} {row['ms_per_step']:>9.3f} {seed or '':>9}  {device}"
-              + ("" if row["finite"] else "  NON-FINITE STATE"), flush=True)
+        seed = SEED1_GTX1070_FPS.get(n) if args.dim == 2 else SEED2_MS.get(n)
+        print(f"{n:>8} {ls:>5} {spp or '-':>4} {row['steps']:>6} {row['seconds']:>8.3f} "
+              f"{row['steps_per_second']:>10.2f} {row['ms_per_step']:>9.3f} {row['particle_steps_per_second']:>16.4g}"
+              f" {str(seed or ''):>12}  {device}" + ("" if row["finite"] else "  NON-FINITE STATE"), flush=True)
         record["host"]["loadavg_now"] = os.getloadavg()
         if args.out:  # rewrite after every case so a killed run keeps what it measured
             if args.backend == "numba":

@@ -34,7 +34,8 @@ def open_backend():
     def open_(name, params, state, stages, spec, **options):
         if name == "vulkan":
             vulkan_or_skip()
-            options.setdefault("validation", True)
+            # validation layers on, unless SPHCORE_TEST_VALIDATION=0 (a GPU machine without them)
+            options.setdefault("validation", os.environ.get("SPHCORE_TEST_VALIDATION", "1") != "0")
         backend = make_backend(name, params, state, stages, spec, **options)
         opened.append(backend)
         return backend

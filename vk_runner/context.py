@@ -13,6 +13,13 @@ FENCE_TIMEOUT_NS = 3600 * 10**9
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 
 
+# One VkInstance per process and validation setting, kept until exit: the NVIDIA driver was
+# seen to refuse (VK_ERROR_INCOMPATIBLE_DRIVER) the 31st instance created in one process even
+# after the previous 30 had been destroyed. Contexts share it and create their own device.
+_INSTANCES = {}
+_CALLBACKS = []  # the debug callbacks must outlive the instance
+
+
 class VulkanError(RuntimeError):
     """A Vulkan failure, with what to do about it in the message."""
 
@@ -209,8 +216,12 @@ class Context:
             device = os.environ.get("SPHCORE_VK_DEVICE") or None
         if validation is None:
             validation = os.environ.get("SPHCORE_VK_VALIDATION", "") not in ("", "0")
-        self.validation_messages = []
-        self.instance = self._create_instance(validation)
+        key = bool(validation)
+        if key not in _INSTANCES:
+            self._instance_messages = []
+            _INSTANCES[key] = (self._create_instance(validation), self._instance_messages)
+        self.instance, self._instance_messages = _INSTANCES[key]
+        self._first_message = len(self._instance_messages)
         self.physical_device = self._choose_device(device)
         props = vk.vkGetPhysicalDeviceProperties(self.physical_device)
         self.device_name = _text(props.deviceName)
@@ -257,18 +268,18 @@ class Context:
         if validation:
             def on_message(severity, kind, data, user):
                 if severity & vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT:
-                    self.validation_messages.append(_text(data.pMessage))
+                    self._instance_messages.append(_text(data.pMessage))
                 return 0
 
             create = vk.vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT")
-            self._messenger = create(instance, vk.VkDebugUtilsMessengerCreateInfoEXT(
+            messenger = create(instance, vk.VkDebugUtilsMessengerCreateInfoEXT(
                 sType=vk.VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT,
                 messageSeverity=(vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT
                                  | vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT),
                 messageType=(vk.VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT
                              | vk.VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT),
                 pfnUserCallback=on_message), None)
-            self._on_message = on_message
+            _CALLBACKS.append((on_message, messenger))
         return instance
 
     def _type_name(self, device_type):
@@ -393,10 +404,12 @@ class Context:
         vk.vkDestroyFence(self.device, self.fence, None)
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
-        if getattr(self, "_messenger", None) is not None:
-            vk.vkGetInstanceProcAddr(self.instance, "vkDestroyDebugUtilsMessengerEXT")(self.instance, self._messenger, None)
-        vk.vkDestroyInstance(self.instance, None)
-        self.device = None
+        self.device = None  # the instance is shared by every Context of this process (see _INSTANCES)
+
+    @property
+    def validation_messages(self):
+        """Validation-layer errors reported since this Context was created."""
+        return self._instance_messages[self._first_message:]
 
     def __enter__(self):
         return self
