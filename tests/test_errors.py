@@ -111,10 +111,14 @@ def test_out_of_range_names_dotted_key_and_range(tmp_path, capsys, table, line, 
 
 @pytest.mark.parametrize("table, line, expected", [
     ("fluid", 'stiffness = "stiff"', ["fluid.stiffness", "expected a number", "'stiff'"]),
-    ("forces", "gravity = [0.0, -9.81, 0.0]", ["forces.gravity", "expected two numbers [x, y]", "m/s^2"]),
+    ("forces", "gravity = [0.0, -9.81, 0.0, 1.0]", ["forces.gravity", "expected [x, y] or [x, y, z]", "m/s^2"]),
+    ("forces", "gravity = [0.0, -9.81, 0.0]", ["forces.gravity", "has 3 components but physics.dimension = 2"]),
+    ("physics", 'equation_of_state = "stiff"', ["physics.equation_of_state", "'linear', 'tait'"]),
+    ("physics", "viscosity = 1", ["physics.viscosity", "expected true or false"]),
     ("time", "steps = 2.5", ["time.steps", "expected an integer"]),
     ("fluid", "blocks = [{ min = [0.3, 0.4] }]", ["fluid.blocks[0]", "exactly the keys min and max"]),
-], ids=["string-for-number", "vec2-with-3-entries", "float-for-int", "block-without-max"])
+], ids=["string-for-number", "vector-with-4-entries", "3-vector-in-2d", "unknown-eos", "number-for-switch",
+        "float-for-int", "block-without-max"])
 def test_wrong_type_names_key(tmp_path, capsys, table, line, expected):
     text = TINY if f"[{table}]" in TINY else TINY + f"[{table}]\n"
     name = line.split(" = ")[0]
