@@ -30,7 +30,7 @@ from benchmarks.steps_per_second import cpu_name, make_case  # noqa: E402
 WARMUP_STEPS = 2  # the first compiles (numba, Taichi JIT); both engines take the same number
 
 
-def timed(step, sync, n, min_seconds):
+def timed(step, sync, min_seconds):
     """Whole chunks of one step until min_seconds have passed: (steps, seconds)."""
     steps, start = 0, time.perf_counter()
     while True:
@@ -63,7 +63,7 @@ def run_numba(scene, x0, threads, min_seconds):
         be.step(WARMUP_STEPS)
         warmup = time.perf_counter() - t0
         rho = be.read()["particle_rho"][:n]
-        steps, seconds = timed(lambda: be.step(1), lambda: None, n, min_seconds)  # step() returns when done
+        steps, seconds = timed(lambda: be.step(1), lambda: None, min_seconds)  # step() returns when done
         out = be.read()
     finally:
         be.close()
@@ -191,9 +191,20 @@ def run_taichi(ti, scene, x0, threads, min_seconds):
     ti.sync()
     warmup = time.perf_counter() - t0
     rho_warm = rho.to_numpy()
-    steps, seconds = timed(step, ti.sync, n, min_seconds)
+    steps, seconds = timed(step, ti.sync, min_seconds)
     assert int(count.to_numpy().sum()) == n  # every particle binned, none dropped (no per-cell cap)
     return result(n, steps, seconds, warmup, rho_warm, x.to_numpy(), v.to_numpy())
+
+
+def sphcore_revision():
+    """HEAD and the files edited since (read-only git), so a figure names the sphcore it timed."""
+    import subprocess
+    root = Path(__file__).resolve().parent.parent
+    try:
+        git = lambda *a: subprocess.run(["git", *a], cwd=root, capture_output=True, text=True).stdout  # noqa: E731
+        return {"commit": git("rev-parse", "HEAD").strip(), "modified": git("status", "--porcelain").split("\n")[:-1]}
+    except OSError as e:
+        return {"error": str(e)}
 
 
 def main():
@@ -209,6 +220,7 @@ def main():
         sys.exit("taichi is not importable: pip install taichi")
     import numba
 
+    loadavg_at_start = os.getloadavg()  # a shared machine: other work skews both engines
     scene, x0 = make_case(args.n, 3, "grid")
     numba_row = run_numba(scene, x0, args.threads, args.min_seconds)
     taichi_row = run_taichi(ti, scene, x0, args.threads, args.min_seconds)
@@ -224,8 +236,9 @@ def main():
               "versions": {"python": platform.python_version(), "numpy": np.__version__,
                            "numba": numba.__version__, "taichi": ".".join(map(str, ti.__version__))},
               "cpu_model": cpu_name(), "cpu_count": os.cpu_count(),
+              "loadavg_at_start": loadavg_at_start, "loadavg_at_end": os.getloadavg(),
               "env": {k: os.environ.get(k) for k in ("OMP_WAIT_POLICY", "NUMBA_THREADING_LAYER", "NUMBA_NUM_THREADS")},
-              "scene": scene.config, "warmup_steps": WARMUP_STEPS,
+              "sphcore_git": sphcore_revision(), "scene": scene.config, "warmup_steps": WARMUP_STEPS,
               "numba": numba_row, "taichi": taichi_row,
               "particle_steps_per_second": {"numba": numba_row["particle_steps_per_second"],
                                             "taichi": taichi_row["particle_steps_per_second"]},

@@ -56,17 +56,29 @@ void main() {
         vec3 xm = vec3(fx ? 2.0 * wall.x - xi.x : xi.x, fy ? 2.0 * wall.y - xi.y : xi.y,
                        fz ? 2.0 * wall.z - xi.z : xi.z);
         ivec3 base = cell_of(xm);
-        // [5] the 3^dim cells around xm (GRID), or one range holding every particle
-        uint cells = GRID ? (DIM == 3u ? 27u : 9u) : 1u;
-        for (uint k = 0u; k < cells; ++k) {
+        // [5] the 3^dim cells around xm (GRID), or one range holding every particle. With walls
+        //     the three cells of an x-row are consecutive in the sorted order, so a row is one
+        //     range (clipped to the box); in an open domain the hash may wrap a row, so each
+        //     cell is a range of its own.
+        uint ranges = GRID ? (WALLS ? (DIM == 3u ? 9u : 3u) : (DIM == 3u ? 27u : 9u)) : 1u;
+        for (uint k = 0u; k < ranges; ++k) {
             uint start = 0u;
             uint end = P.n;
             if (GRID) {
-                ivec3 c = base + ivec3(int(k % 3u) - 1, int(k / 3u % 3u) - 1, int(k / 9u) - (DIM == 3u ? 1 : 0));
-                int cell = cell_index(c);
-                if (cell < 0) continue;
-                start = cell_start[cell];
-                end = start + cell_pyramid[cell];
+                uint row = WALLS ? k : k / 3u;
+                ivec3 c = base + ivec3(WALLS ? -1 : int(k % 3u) - 1, int(row % 3u) - 1,
+                                       int(row / 3u) - (DIM == 3u ? 1 : 0));
+                ivec3 c_last = c;
+                if (WALLS) {
+                    c.x = max(c.x, 0);
+                    c_last.x = min(c_last.x + 2, int(P.grid_dim.x) - 1);
+                    if (c.x > c_last.x) continue;
+                }
+                int first = cell_index(c);
+                int last = cell_index(c_last);
+                if (first < 0) continue;
+                start = cell_start[first];
+                end = cell_start[last] + cell_pyramid[last];
             }
             for (uint j = start; j < end; ++j) {
                 vec3 xj = particle_x[j].xyz;

@@ -71,18 +71,31 @@ def compute_forces(spec):
             xm_y = f32(2.0) * wall_y - xi_y if fy else xi_y
             xm_z = f32(2.0) * wall_z - xi_z if fz else xi_z
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [5] the 3^dim cells around xm (GRID), or one range holding every particle
-            cells = (27 if DIM == 3 else 9) if GRID else 1
-            for k in range(cells):
+            # [5] the 3^dim cells around xm (GRID), or one range holding every particle. With walls
+            #     the three cells of an x-row are consecutive in the sorted order, so a row is one
+            #     range (clipped to the box); in an open domain the hash may wrap a row, so each
+            #     cell is a range of its own.
+            ranges = ((9 if DIM == 3 else 3) if WALLS else (27 if DIM == 3 else 9)) if GRID else 1
+            for k in range(ranges):
                 start = 0
                 end = int(P.n)
                 if GRID:
-                    cell = cell_index(P, base_x + k % 3 - 1, base_y + k // 3 % 3 - 1,
-                                      base_z + k // 9 - (1 if DIM == 3 else 0))
-                    if cell < 0:
+                    row = k if WALLS else k // 3
+                    c_x = base_x + (-1 if WALLS else k % 3 - 1)
+                    c_y = base_y + row % 3 - 1
+                    c_z = base_z + row // 3 - (1 if DIM == 3 else 0)
+                    c_last_x = c_x
+                    if WALLS:
+                        c_x = max(c_x, 0)
+                        c_last_x = min(c_last_x + 2, int(P.grid_dim[0]) - 1)
+                        if c_x > c_last_x:
+                            continue
+                    first = cell_index(P, c_x, c_y, c_z)
+                    last = cell_index(P, c_last_x, c_y, c_z)
+                    if first < 0:
                         continue
-                    start = int(cell_start[cell])
-                    end = start + int(cell_pyramid[cell])
+                    start = int(cell_start[first])
+                    end = int(cell_start[last]) + int(cell_pyramid[last])
                 for j in range(start, end):
                     if j == i and image == 0:
                         continue
