@@ -1,5 +1,6 @@
 """Command line: `sphcore run SCENE`, `sphcore keys`, `sphcore plot RUN_DIR`."""
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -76,6 +77,9 @@ def main(argv=None):
     except (SceneError, SimulationError, VulkanError, ShaderCompileError) as e:
         print(f"sphcore: error: {e}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # output piped into a reader that stopped early (`sphcore keys | head`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except KeyboardInterrupt:
         print("sphcore: interrupted; files written so far are complete", file=sys.stderr)
         return 130
