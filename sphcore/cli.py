@@ -39,8 +39,13 @@ def cmd_keys(args):
 
 def cmd_plot(args):
     from sphcore.plot import plot_state
+    from sphcore.scene import SceneError
 
-    out = plot_state(Path(args.run_dir) / "final.npz", args.out)
+    final = Path(args.run_dir) / "final.npz"
+    if not final.is_file():
+        raise SceneError(f"{final}: no such file; `sphcore run` writes it when a run completes "
+                         "(a run that stopped early keeps its snapshots, *.vtp)")
+    out = plot_state(final, args.out)
     print(f"wrote {out}")
 
 

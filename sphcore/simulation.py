@@ -90,7 +90,9 @@ class Simulation:
         if self.scene["domain.boundary"] == "open":
             return
         x = state["particle_x"]
-        lo, hi = np.asarray(self.scene["domain.box_min"]), np.asarray(self.scene["domain.box_max"])
+        # the walls as the shaders see them (float32): a particle clamped onto a wall sits exactly there
+        lo = np.asarray(self.scene["domain.box_min"], np.float32)
+        hi = np.asarray(self.scene["domain.box_max"], np.float32)
         outside = ((x < lo) | (x > hi)).any(axis=1)
         if outside.any():
             i = int(np.argmax(outside))

@@ -187,3 +187,9 @@ def test_plot_to_chosen_path(numba_run, tmp_path, capsys):
     target = tmp_path / "picture.png"
     run_cli(capsys, "plot", numba_run, "--out", target)
     assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_of_a_run_without_final_state_says_so(tmp_path, capsys):
+    assert main(["plot", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "final.npz: no such file" in err and "Traceback" not in err

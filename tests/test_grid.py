@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from conftest import BACKENDS
 
-from sphcore.backends import STATUS_CLEAR, Stage, empty_state, plan
+from sphcore.backends import STATUS_CLEAR, NumbaBackend, Stage, empty_state, plan
 from sphcore.params import pyramid_levels
 from sphcore.scene import Scene
 from sphcore.simulation import Simulation, SimulationError
@@ -111,8 +111,6 @@ def test_open_domain_neighbour_sets_equal_all_pairs_exactly():
     rng = np.random.default_rng(7)
     x = rng.uniform(-0.5, 0.8, (300, 3)).astype(np.float32)  # over several hash periods
     params, state = load(scene, x)
-    sim = Simulation.__new__(Simulation)
-    from sphcore.backends import NumbaBackend
     backend = NumbaBackend(params, state, plan(scene), stats_spec(scene))
     for stage in plan(scene)[:-2]:
         backend.run_stage(stage)
@@ -130,7 +128,6 @@ def test_sorted_order_is_by_cell_then_index_and_offsets_match_counts():
     scene = scene_for(3)
     x = np.random.default_rng(3).uniform(0, BOX, (500, 3)).astype(np.float32)
     params, state = load(scene, x)
-    from sphcore.backends import NumbaBackend
     backend = NumbaBackend(params, state, plan(scene), scene.spec)
     for stage in plan(scene):
         if stage.name == "gather_particles":

@@ -166,3 +166,19 @@ def test_without_surface_tension_the_cube_stays_square(open_backend):
     sim = open_backend("numba", params, state, stages, spec)
     sim.step(2000)
     assert sphericity(particles(sim, 3)["particle_x"]) > 1.4
+
+
+def test_a_particle_clamped_onto_a_wall_is_inside():
+    """float32(1.2) > 1.2: the box check must compare with the walls the shaders use (float32)."""
+    from sphcore.simulation import Simulation
+    scene = Scene.from_dict({"physics": {"dimension": 3}, "domain": {"box_max": [1.2, 0.6, 0.3]},
+                             "fluid": {"blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.1, 0.1, 0.1]}], "spacing": 0.02}})
+    sim = Simulation(scene, "numba")
+    x = sim.backend.state["particle_x"]
+    x[0, :3] = np.array([1.2, 0.6, 0.3], np.float32)
+    assert float(x[0, 0]) > 1.2  # the premise
+    x[1, :3] = 0.0
+    sim.read()  # no SimulationError
+    x[2, 0] = np.nextafter(np.float32(1.2), np.float32(2))
+    with pytest.raises(Exception, match="left the box"):
+        sim.read()
