@@ -30,6 +30,42 @@ int cell_index(ivec3 c) {
     return (c.z * d.y + c.y) * d.x + c.x;
 }
 
+// Wall images: bit a of the result is set where the wall nearer to x on axis a (returned in
+// `wall`) is within h, so that x also sees every particle mirrored across it (walls only; z in 3D).
+uint near_walls(vec3 x, out vec3 wall) {
+    wall = vec3(x.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
+                x.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
+                x.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
+    uint mirrored = 0u;
+    if (WALLS && abs(x.x - wall.x) < P.h) mirrored |= 1u;
+    if (WALLS && abs(x.y - wall.y) < P.h) mirrored |= 2u;
+    if (WALLS && DIM == 3u && abs(x.z - wall.z) < P.h) mirrored |= 4u;
+    return mirrored;
+}
+
+// Ranges of sorted particles that hold the 3^dim cells around a cell: with walls the three
+// cells of an x-row are consecutive in the sorted order, so a row is one range (clipped to the
+// box); in an open domain the hash may wrap a row, so each cell is a range of its own. Without
+// the grid, one range holds every particle.
+uint range_count() {
+    return GRID ? (WALLS ? (DIM == 3u ? 9u : 3u) : (DIM == 3u ? 27u : 9u)) : 1u;
+}
+
+// First and last cell of range k around cell `base`; false where the range is outside the box.
+bool range_cells(ivec3 base, uint k, out int first, out int last) {
+    uint row = WALLS ? k : k / 3u;
+    ivec3 c = base + ivec3(WALLS ? -1 : int(k % 3u) - 1, int(row % 3u) - 1, int(row / 3u) - (DIM == 3u ? 1 : 0));
+    ivec3 c_last = c;
+    if (WALLS) {
+        c.x = max(c.x, 0);
+        c_last.x = min(c_last.x + 2, int(P.grid_dim.x) - 1);
+        if (c.x > c_last.x) return false;
+    }
+    first = cell_index(c);
+    last = cell_index(c_last);
+    return first >= 0;
+}
+
 // Offset of HistoPyramid level l in the pyramid buffer, and its node count.
 uint level_offset(uint l) {
     uint offset = 0u;

@@ -29,13 +29,8 @@ void main() {
     float pi = particle_p[i];
     float pi_rho2 = pi / (rhoi * rhoi);
     // [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
-    vec3 wall = vec3(xi.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
-                     xi.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
-                     xi.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
-    uint mirrored = 0u;
-    if (WALLS && abs(xi.x - wall.x) < P.h) mirrored |= 1u;
-    if (WALLS && abs(xi.y - wall.y) < P.h) mirrored |= 2u;
-    if (WALLS && DIM == 3u && abs(xi.z - wall.z) < P.h) mirrored |= 4u;
+    vec3 wall;
+    uint mirrored = near_walls(xi, wall);
     // [4] sums over every other particle and every image within h
     vec3 f_pressure = vec3(0.0);
     vec3 f_viscosity = vec3(0.0);
@@ -48,27 +43,14 @@ void main() {
         vec3 xm = vec3(fx ? 2.0 * wall.x - xi.x : xi.x, fy ? 2.0 * wall.y - xi.y : xi.y,
                        fz ? 2.0 * wall.z - xi.z : xi.z);
         ivec3 base = cell_of(xm);
-        // [5] the 3^dim cells around xm (GRID), or one range holding every particle. With walls
-        //     the three cells of an x-row are consecutive in the sorted order, so a row is one
-        //     range (clipped to the box); in an open domain the hash may wrap a row, so each
-        //     cell is a range of its own.
-        uint ranges = GRID ? (WALLS ? (DIM == 3u ? 9u : 3u) : (DIM == 3u ? 27u : 9u)) : 1u;
-        for (uint k = 0u; k < ranges; ++k) {
+        // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        for (uint k = 0u; k < range_count(); ++k) {
             uint start = 0u;
             uint end = P.n;
             if (GRID) {
-                uint row = WALLS ? k : k / 3u;
-                ivec3 c = base + ivec3(WALLS ? -1 : int(k % 3u) - 1, int(row % 3u) - 1,
-                                       int(row / 3u) - (DIM == 3u ? 1 : 0));
-                ivec3 c_last = c;
-                if (WALLS) {
-                    c.x = max(c.x, 0);
-                    c_last.x = min(c_last.x + 2, int(P.grid_dim.x) - 1);
-                    if (c.x > c_last.x) continue;
-                }
-                int first = cell_index(c);
-                int last = cell_index(c_last);
-                if (first < 0) continue;
+                int first;
+                int last;
+                if (!range_cells(base, k, first, last)) continue;
                 start = cell_start[first];
                 end = cell_start[last] + cell_pyramid[last];
             }

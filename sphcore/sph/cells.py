@@ -14,7 +14,7 @@ CELL_LIMIT = 1 << 24  # |cell coordinate| beyond this: outside the hashed range
 
 @lru_cache(maxsize=None)
 def cells(spec):
-    DIM, WALLS = spec.DIM, spec.WALLS
+    DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
 
     @njit
     def cell_of(P, x_x, x_y, x_z):
@@ -43,7 +43,45 @@ def cells(spec):
             c_z = (c_z + d_z * (CELL_LIMIT // d_z + 2)) % d_z
         return (c_z * d_y + c_y) * d_x + c_x
 
-    return cell_of, cell_index
+    @njit
+    def near_walls(P, x_x, x_y, x_z):
+        """Wall images: (mirrored, wall): bit a of mirrored is set where the wall nearer to x on
+        axis a is within h, so that x also sees every particle mirrored across it."""
+        wall_x = P.box_min[0] if x_x - P.box_min[0] < P.h else P.box_max[0]
+        wall_y = P.box_min[1] if x_y - P.box_min[1] < P.h else P.box_max[1]
+        wall_z = P.box_min[2] if x_z - P.box_min[2] < P.h else P.box_max[2]
+        mirrored = 0
+        if WALLS and abs(x_x - wall_x) < P.h:
+            mirrored |= 1
+        if WALLS and abs(x_y - wall_y) < P.h:
+            mirrored |= 2
+        if WALLS and DIM == 3 and abs(x_z - wall_z) < P.h:
+            mirrored |= 4
+        return mirrored, wall_x, wall_y, wall_z
+
+    @njit
+    def range_count():
+        """Ranges of sorted particles that hold the 3^dim cells around a cell (see cells.glsl)."""
+        return ((9 if DIM == 3 else 3) if WALLS else (27 if DIM == 3 else 9)) if GRID else 1
+
+    @njit
+    def range_cells(P, base_x, base_y, base_z, k):
+        """(inside, first, last): first and last cell of range k around cell `base`."""
+        row = k if WALLS else k // 3
+        c_x = base_x + (-1 if WALLS else k % 3 - 1)
+        c_y = base_y + row % 3 - 1
+        c_z = base_z + row // 3 - (1 if DIM == 3 else 0)
+        c_last_x = c_x
+        if WALLS:
+            c_x = max(c_x, 0)
+            c_last_x = min(c_last_x + 2, int(P.grid_dim[0]) - 1)
+            if c_x > c_last_x:
+                return False, -1, -1
+        first = cell_index(P, c_x, c_y, c_z)
+        last = cell_index(P, c_last_x, c_y, c_z)
+        return first >= 0, first, last
+
+    return cell_of, cell_index, near_walls, range_count, range_cells
 
 
 @njit

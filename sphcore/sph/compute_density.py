@@ -28,7 +28,7 @@ def neighbour_hash(id, image):
 @lru_cache(maxsize=None)
 def compute_density(spec):
     DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
-    cell_of, cell_index = cells(spec)
+    cell_of, cell_index, near_walls, range_count, range_cells = cells(spec)
 
     @njit
     def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start,
@@ -44,16 +44,7 @@ def compute_density(spec):
         # [3] wall images: within h of a wall, particle i also sees every particle mirrored across
         #     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
         #     that the wall nearer to xi on axis a is within h.
-        wall_x = P.box_min[0] if xi_x - P.box_min[0] < P.h else P.box_max[0]
-        wall_y = P.box_min[1] if xi_y - P.box_min[1] < P.h else P.box_max[1]
-        wall_z = P.box_min[2] if xi_z - P.box_min[2] < P.h else P.box_max[2]
-        mirrored = 0
-        if WALLS and abs(xi_x - wall_x) < P.h:
-            mirrored |= 1
-        if WALLS and abs(xi_y - wall_y) < P.h:
-            mirrored |= 2
-        if WALLS and DIM == 3 and abs(xi_z - wall_z) < P.h:
-            mirrored |= 4
+        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         # [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
         #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
@@ -71,28 +62,13 @@ def compute_density(spec):
             xm_y = f32(2.0) * wall_y - xi_y if fy else xi_y
             xm_z = f32(2.0) * wall_z - xi_z if fz else xi_z
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [5] the 3^dim cells around xm (GRID), or one range holding every particle. With walls
-            #     the three cells of an x-row are consecutive in the sorted order, so a row is one
-            #     range (clipped to the box); in an open domain the hash may wrap a row, so each
-            #     cell is a range of its own.
-            ranges = ((9 if DIM == 3 else 3) if WALLS else (27 if DIM == 3 else 9)) if GRID else 1
-            for k in range(ranges):
+            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            for k in range(range_count()):
                 start = 0
                 end = int(P.n)
                 if GRID:
-                    row = k if WALLS else k // 3
-                    c_x = base_x + (-1 if WALLS else k % 3 - 1)
-                    c_y = base_y + row % 3 - 1
-                    c_z = base_z + row // 3 - (1 if DIM == 3 else 0)
-                    c_last_x = c_x
-                    if WALLS:
-                        c_x = max(c_x, 0)
-                        c_last_x = min(c_last_x + 2, int(P.grid_dim[0]) - 1)
-                        if c_x > c_last_x:
-                            continue
-                    first = cell_index(P, c_x, c_y, c_z)
-                    last = cell_index(P, c_last_x, c_y, c_z)
-                    if first < 0:
+                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                    if not inside:
                         continue
                     start = int(cell_start[first])
                     end = int(cell_start[last]) + int(cell_pyramid[last])
