@@ -43,6 +43,12 @@ uint near_walls(vec3 x, out vec3 wall) {
     return mirrored;
 }
 
+// Point x mirrored across the walls of the axes whose bits are set in `image`.
+vec3 reflected(vec3 x, vec3 wall, uint image) {
+    return vec3((image & 1u) != 0u ? 2.0 * wall.x - x.x : x.x, (image & 2u) != 0u ? 2.0 * wall.y - x.y : x.y,
+                (image & 4u) != 0u ? 2.0 * wall.z - x.z : x.z);
+}
+
 // Ranges of sorted particles that hold the 3^dim cells around a cell: with walls the three
 // cells of an x-row are consecutive in the sorted order, so a row is one range (clipped to the
 // box); in an open domain the hash may wrap a row, so each cell is a range of its own. Without

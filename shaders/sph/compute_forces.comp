@@ -40,8 +40,7 @@ void main() {
         bool fx = (image & 1u) != 0u;
         bool fy = (image & 2u) != 0u;
         bool fz = (image & 4u) != 0u;
-        vec3 xm = vec3(fx ? 2.0 * wall.x - xi.x : xi.x, fy ? 2.0 * wall.y - xi.y : xi.y,
-                       fz ? 2.0 * wall.z - xi.z : xi.z);
+        vec3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
         for (uint k = 0u; k < range_count(); ++k) {
@@ -56,11 +55,7 @@ void main() {
             }
             for (uint j = start; j < end; ++j) {
                 if (j == i && image == 0u) continue;
-                vec3 xj = particle_x[j].xyz;
-                float xk = fx ? 2.0 * wall.x - xj.x : xj.x;
-                float yk = fy ? 2.0 * wall.y - xj.y : xj.y;
-                float zk = fz ? 2.0 * wall.z - xj.z : xj.z;
-                vec3 r = xi - vec3(xk, yk, zk);
+                vec3 r = xi - reflected(particle_x[j].xyz, wall, image);
                 float r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 >= P.h2) continue;
                 float rhoj = particle_rho[j];

@@ -60,6 +60,13 @@ def cells(spec):
         return mirrored, wall_x, wall_y, wall_z
 
     @njit
+    def reflected(x_x, x_y, x_z, wall_x, wall_y, wall_z, image):
+        """Point x mirrored across the walls of the axes whose bits are set in `image`."""
+        return (f32(2.0) * wall_x - x_x if (image & 1) != 0 else x_x,
+                f32(2.0) * wall_y - x_y if (image & 2) != 0 else x_y,
+                f32(2.0) * wall_z - x_z if (image & 4) != 0 else x_z)
+
+    @njit
     def range_count():
         """Ranges of sorted particles that hold the 3^dim cells around a cell (see cells.glsl)."""
         return ((9 if DIM == 3 else 3) if WALLS else (27 if DIM == 3 else 9)) if GRID else 1
@@ -81,7 +88,7 @@ def cells(spec):
         last = cell_index(P, c_last_x, c_y, c_z)
         return first >= 0, first, last
 
-    return cell_of, cell_index, near_walls, range_count, range_cells
+    return cell_of, cell_index, near_walls, reflected, range_count, range_cells
 
 
 @njit

@@ -21,7 +21,7 @@ f32 = np.float32
 def compute_forces(spec):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
-    cell_of, cell_index, near_walls, range_count, range_cells = cells(spec)
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec)
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
@@ -58,9 +58,7 @@ def compute_forces(spec):
             fx = (image & 1) != 0
             fy = (image & 2) != 0
             fz = (image & 4) != 0
-            xm_x = f32(2.0) * wall_x - xi_x if fx else xi_x
-            xm_y = f32(2.0) * wall_y - xi_y if fy else xi_y
-            xm_z = f32(2.0) * wall_z - xi_z if fz else xi_z
+            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
             for k in range(range_count()):
@@ -75,12 +73,8 @@ def compute_forces(spec):
                 for j in range(start, end):
                     if j == i and image == 0:
                         continue
-                    xj_x = particle_x[j, 0]
-                    xj_y = particle_x[j, 1]
-                    xj_z = particle_x[j, 2]
-                    xk = f32(2.0) * wall_x - xj_x if fx else xj_x
-                    yk = f32(2.0) * wall_y - xj_y if fy else xj_y
-                    zk = f32(2.0) * wall_z - xj_z if fz else xj_z
+                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
+                                           wall_x, wall_y, wall_z, image)
                     r_x = xi_x - xk
                     r_y = xi_y - yk
                     r_z = xi_z - zk

@@ -18,7 +18,7 @@ f32 = np.float32
 @lru_cache(maxsize=None)
 def count_cells(spec):
     WALLS = spec.WALLS
-    cell_of, cell_index, _, _, _ = cells(spec)
+    cell_of, cell_index, _, _, _, _ = cells(spec)
 
     @njit
     def count_cells_main(i, params, particle_x, particle_id, particle_cell, particle_slot, cell_pyramid,
