@@ -48,6 +48,7 @@ def dtype_from_glsl_block(text):
 
 
 PARAMS_DTYPE = dtype_from_glsl_block((SHADER_DIR / "sph" / "params.glsl").read_text())
+MC_PARAMS_DTYPE = dtype_from_glsl_block((SHADER_DIR / "mc" / "params.glsl").read_text())
 
 
 def kernel_coefficients(h, dim=2):
@@ -132,14 +133,18 @@ def _constants(text):
 
 
 SPEC_CONSTANTS = _constants((SHADER_DIR / "sph" / "constants.glsl").read_text())
+MC_SPEC_CONSTANTS = _constants((SHADER_DIR / "mc" / "constants.glsl").read_text())
 
 
-class Spec(namedtuple("Spec", list(SPEC_CONSTANTS))):
-    """A scene's compile-time choices: specialization constants in GLSL, closure constants in numba."""
-
+def _spec_class(name, constants):
+    """A namedtuple of the constants' values with `values()`: the (constant_id, uint32 value)
+    pairs of a VkSpecializationInfo."""
     def values(self):
-        """(constant_id, uint32 value) pairs for a VkSpecializationInfo."""
-        return [(SPEC_CONSTANTS[name][0], int(value)) for name, value in self._asdict().items()]
+        return [(constants[key][0], int(value)) for key, value in self._asdict().items()]
+
+    return type(name, (namedtuple(name, list(constants)),), {"__slots__": (), "values": values})
 
 
+Spec = _spec_class("Spec", SPEC_CONSTANTS)  # a scene's compile-time choices (shaders/sph/constants.glsl)
+McSpec = _spec_class("McSpec", MC_SPEC_CONSTANTS)  # marching-cubes options (shaders/mc/constants.glsl)
 DEFAULT_SPEC = Spec(**{name: default for name, (_, default) in SPEC_CONSTANTS.items()})

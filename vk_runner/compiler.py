@@ -1,6 +1,6 @@
 """GLSL -> SPIR-V with glslangValidator or glslc, cached by content hash.
 
-The cache key covers the shader, every .glsl file beside it (the #include targets), the
+The cache key covers the shader, every .glsl file in the shader tree (the #include targets), the
 compiler and its arguments, so an edited include rebuilds every shader that may use it.
 Cache folder: $SPHCORE_CACHE_DIR, else ~/.cache/sphcore/spirv. No SPIR-V is committed.
 """
@@ -45,8 +45,8 @@ def compile_glsl(source, target_env="vulkan1.1"):
     source = Path(source).resolve()
     kind, path = find_compiler()
     digest = hashlib.sha256()
-    for f in [source, *sorted(source.parent.glob("*.glsl"))]:
-        digest.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    for f in [source, *sorted(source.parent.parent.glob("*/*.glsl"))]:
+        digest.update(f"{f.parent.name}/{f.name}".encode() + b"\0" + f.read_bytes() + b"\0")
     digest.update(" ".join(_command(kind, path, Path("s"), Path("o"), target_env)).encode())
     cached = cache_dir() / f"{source.stem}-{digest.hexdigest()[:24]}.spv"
     if cached.is_file():

@@ -53,7 +53,7 @@ class Buffer:
         vk = ctx.vk
         self.ctx, self.nbytes, self.name = ctx, max(int(nbytes), 4), name
         usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
-                 | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT)
+                 | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT | vk.VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT)
         self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, name)
 
     def write(self, array):
@@ -170,8 +170,7 @@ class Recording:
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO))
         self._keep = []
 
-    def dispatch(self, pipeline, push, n_invocations):
-        """Bind `pipeline`, push the bytes of `push` and dispatch enough groups for n invocations."""
+    def _bind(self, pipeline, push):
         vk, cb = self.ctx.vk, self.command_buffer
         vk.vkCmdBindPipeline(cb, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.pipeline)
         vk.vkCmdBindDescriptorSets(cb, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout, 0, 1,
@@ -180,18 +179,41 @@ class Recording:
         self._keep.append(data)
         vk.vkCmdPushConstants(cb, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, data.nbytes,
                               vk.ffi.from_buffer(data))
-        groups = (int(n_invocations) + pipeline.local_size - 1) // pipeline.local_size
-        if groups > 0:
-            vk.vkCmdDispatch(cb, groups, 1, 1)
+
+    def dispatch(self, pipeline, push, n_invocations=None, groups=None):
+        """Bind `pipeline`, push the bytes of `push` and dispatch enough groups for n invocations
+        (or `groups`, an (x, y, z) triple)."""
+        self._bind(pipeline, push)
+        if groups is None:
+            groups = ((int(n_invocations) + pipeline.local_size - 1) // pipeline.local_size, 1, 1)
+        if min(groups) > 0:
+            self.ctx.vk.vkCmdDispatch(self.command_buffer, *(int(g) for g in groups))
+
+    def dispatch_indirect(self, pipeline, push, buffer, offset=0):
+        """Dispatch with the (x, y, z) group counts that `buffer` holds at byte `offset` when it runs."""
+        self._bind(pipeline, push)
+        self.ctx.vk.vkCmdDispatchIndirect(self.command_buffer, buffer.buffer, offset)
+
+    def fill(self, buffer, value=0):
+        """Set every 32-bit word of `buffer` to `value`."""
+        vk = self.ctx.vk
+        vk.vkCmdFillBuffer(self.command_buffer, buffer.buffer, 0, WHOLE_SIZE, value)
+        barrier = vk.VkMemoryBarrier(sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+                                     srcAccessMask=vk.VK_ACCESS_TRANSFER_WRITE_BIT,
+                                     dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT)
+        vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_TRANSFER_BIT,
+                                vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, [barrier], 0, None, 0, None)
 
     def barrier(self):
         """Make every shader write so far visible to every later shader read and write."""
         vk = self.ctx.vk
         barrier = vk.VkMemoryBarrier(
             sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER, srcAccessMask=vk.VK_ACCESS_SHADER_WRITE_BIT,
-            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT)
+            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT
+            | vk.VK_ACCESS_INDIRECT_COMMAND_READ_BIT)
         vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                                vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, [barrier], 0, None, 0, None)
+                                vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT,
+                                0, 1, [barrier], 0, None, 0, None)
 
     def end(self):
         self.ctx.vk.vkEndCommandBuffer(self.command_buffer)

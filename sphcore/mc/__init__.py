@@ -1,0 +1,1 @@
+"""Marching cubes: numba mirrors of shaders/mc/*.comp and the generated case tables."""

@@ -1,0 +1,34 @@
+"""Build HistoPyramid level P.level from the level below: each node is the sum of its 8
+children (seed 2's reduction, over the cubes in index order). One invocation per node.
+
+Mirror of shaders/mc/reduce_cubes.comp: same names, same statement order, same step labels.
+"""
+from functools import lru_cache
+
+from numba import njit
+
+from sphcore.mc.pyramid import level_offset, level_size
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def reduce_cubes(spec):
+    @njit
+    def reduce_cubes_main(node, params, cube_pyramid):
+        P = params[0]
+        # [1] one invocation per node of level P.level
+        size = level_size(P, P.level)
+        if node >= size:
+            return
+        # [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
+        below = level_offset(P, P.level - 1)
+        below_size = level_size(P, P.level - 1)
+        total = 0
+        for k in range(8):
+            child = 8 * node + k
+            if child < below_size:
+                total += cube_pyramid[below + child]
+        # [3] store
+        cube_pyramid[level_offset(P, P.level) + node] = total
+
+    return launcher(reduce_cubes_main)
