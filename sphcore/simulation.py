@@ -128,11 +128,12 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, **backe
     """
     from tqdm import tqdm
 
-    from sphcore.output import SnapshotSeries, atomic_savez
+    from sphcore.output import SnapshotSeries, atomic_savez, atomic_write_bytes
 
     steps = scene["time.steps"] if steps is None else steps
     out_dir = Path(out_dir or Path("runs") / scene["name"])
     out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out_dir / "scene.json", scene.to_json().encode())  # what `sphcore render` reads
     series = SnapshotSeries(out_dir, scene["name"])
     every = scene["time.output_every"]
     sim = Simulation(scene, backend, **backend_options)

@@ -149,10 +149,12 @@ class Extractor:
         return 1 if kind == "one" else self.sizes.get(kind)
 
     def extract(self, volume, level):
-        """(position (V, 3), normal (V, 3), key (V,)) of the triangle soup at `level`; an output
-        too small for the surface is enlarged and the extraction run again."""
+        """(position (V, 3), normal (V, 3), key (V,)) of the triangle soup at `level` (volume None:
+        the one already on the device, from `field`); an output too small for the surface is
+        enlarged and the extraction run again."""
         self.params[0]["isolevel"] = level
-        self.device.write("volume", np.ascontiguousarray(volume, np.float32).reshape(-1))
+        if volume is not None:
+            self.device.write("volume", np.ascontiguousarray(volume, np.float32).reshape(-1))
         while True:
             self.device.write("arguments", np.zeros(4, np.uint32))
             self.device.run(self.stages())
@@ -361,3 +363,56 @@ def marching_cubes(volume, level=None, spacing=(1.0, 1.0, 1.0), backend="numba",
     with Extractor(volume.shape, spacing, backend=backend, method=method, midpoint=midpoint,
                    forward_normals=forward_normals, device=device) as extractor:
         return weld(*extractor.extract(volume, level))
+
+
+def sample_grid(position, h, spacing, box=None):
+    """(origin, shape) of a grid of `spacing` over the particles' bounding box grown by h and one
+    spacing on every side (so the surface closes inside it), clipped to `box` (walls)."""
+    lo = position.min(axis=0) - (h + spacing)
+    hi = position.max(axis=0) + (h + spacing)
+    if box is not None:
+        lo, hi = np.maximum(lo, box[0]), np.minimum(hi, box[1])
+    shape = np.maximum(np.ceil((hi - lo) / spacing).astype(int) + 1, 2)
+    return lo, tuple(int(k) for k in shape)
+
+
+def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", method="histopyramid",
+                     device=None, with_field=False):
+    """The fluid's surface (verts, faces, normals) in scene coordinates: the isosurface at `level` of
+    the colour field sum_j m / rho_j W(x - x_j) (sample_field), sampled every `spacing`
+    (default h / 2) over the particles' bounding box. The particles are sorted into the
+    neighbour grid and their densities computed by the scene's own stages first. With
+    `with_field`, also returns (volume, origin, spacing)."""
+    from sphcore.backends import Stage, empty_state, make_backend, neighbour_stages
+
+    if scene.dim != 3:
+        raise ValueError(f"a surface needs a 3D scene; {scene['name']} is {scene.dim}D")
+    position = np.asarray(position, np.float32)
+    spacing = float(spacing or scene.h / 2)
+    if not spacing > 0:
+        raise ValueError(f"spacing must be positive, got {spacing}")
+    walls = scene["domain.boundary"] == "walls"
+    scene_grid = scene.config["physics"]["neighbour_search"]
+    scene.config["physics"]["neighbour_search"] = "grid"  # the field reads the grid whatever the scene's search
+    try:
+        params, spec = scene.params(len(position)), scene.spec
+    finally:
+        scene.config["physics"]["neighbour_search"] = scene_grid
+    state = empty_state(params)
+    state["particle_x"][:, :3] = position
+    cells = int(params[0]["cell_total"])
+    sorter = make_backend(backend, params, state, neighbour_stages(cells) + [Stage("compute_density")], spec,
+                          **({"device": device} if backend == "vulkan" else {}))
+    try:
+        sorter.step(1)
+        sorted_state = sorter.read()
+    finally:
+        sorter.close()
+    box = (np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])) if walls else None
+    origin, shape = sample_grid(position, scene.h, spacing, box)
+    with Extractor(shape, (spacing,) * 3, origin, backend=backend, method=method, particles=len(position),
+                   cells=cells, sph=params[0], spec=spec, device=device) as extractor:
+        volume = extractor.field(sorted_state["particle_x"], sorted_state["particle_rho"],
+                                 sorted_state["cell_pyramid"], sorted_state["cell_start"])
+        mesh = weld(*extractor.extract(None, level))
+    return mesh + ((volume, origin, spacing),) if with_field else mesh
