@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Set up a Debian/Ubuntu machine for sphcore: Vulkan on the CPU (lavapipe), the validation
-# layers, the GLSL compilers, and the project with its test extras. Safe to run again.
+# layers, the GLSL compilers, OpenGL through EGL on the CPU (llvmpipe, for `sphcore render`'s
+# offscreen pictures: no X server needed), and the project with its test extras. Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")"
-packages=(mesa-vulkan-drivers libvulkan1 vulkan-tools vulkan-validationlayers glslang-tools glslc spirv-tools)
+packages=(mesa-vulkan-drivers libvulkan1 vulkan-tools vulkan-validationlayers glslang-tools glslc spirv-tools
+          libegl1 libegl-mesa0 libgl1-mesa-dri)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,4 +1,4 @@
-"""Command line: `sphcore run SCENE`, `sphcore keys`, `sphcore plot RUN_DIR`."""
+"""Command line: `sphcore run SCENE`, `sphcore keys`, `sphcore plot RUN_DIR`, `sphcore render RUN_DIR`."""
 import argparse
 import os
 import sys
@@ -49,6 +49,19 @@ def cmd_plot(args):
     print(f"wrote {out}")
 
 
+def cmd_render(args):
+    try:
+        import pyvista  # noqa: F401
+    except ImportError:
+        sys.exit("sphcore: error: `sphcore render` needs pyvista: pip install -e '.[render]'")
+    from sphcore.render import render_run
+
+    out = Path(args.out or Path(args.run_dir) / "render")
+    written = render_run(args.run_dir, out, backend=args.backend, spacing=args.spacing, level=args.level,
+                         particles=args.particles, every=args.every, mesh_format=args.format)
+    print(f"wrote {len(written) // 2} frames ({args.format} meshes and PNGs) to {out}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="sphcore", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -67,11 +80,25 @@ def main(argv=None):
     p.add_argument("run_dir")
     p.add_argument("--out", help="PNG path (default: RUN_DIR/final.png)")
     p.set_defaults(func=cmd_plot)
+    p = sub.add_parser("render", help="surface meshes and pictures of every snapshot of a 3D run (offscreen)")
+    p.add_argument("run_dir")
+    p.add_argument("--out", help="output folder (default: RUN_DIR/render)")
+    p.add_argument("--backend", choices=["numba", "vulkan"], default="numba", help="where the surface is extracted")
+    p.add_argument("--spacing", type=float, help="sample spacing in metres (default: h / 2)")
+    p.add_argument("--level", type=float, default=0.5, help="isolevel of the colour field (default 0.5)")
+    p.add_argument("--particles", action="store_true", help="also draw the particles as points")
+    p.add_argument("--every", type=int, default=1, help="render every K-th snapshot (default 1: all)")
+    p.add_argument("--format", choices=["vtp", "ply"], default="vtp", help="mesh file format (default vtp)")
+    p.set_defaults(func=cmd_render)
     args = parser.parse_args(argv)
     if getattr(args, "steps", None) is not None and args.steps < 0:
         parser.error(f"--steps must be >= 0, got {args.steps}")
     if getattr(args, "local_size", 1) < 1:
         parser.error(f"--local-size must be >= 1, got {args.local_size}")
+    if getattr(args, "every", 1) < 1:
+        parser.error(f"--every must be >= 1, got {args.every}")
+    if getattr(args, "spacing", None) is not None and not args.spacing > 0:
+        parser.error(f"--spacing must be > 0, got {args.spacing}")
 
     from sphcore.scene import SceneError
     from sphcore.simulation import SimulationError
