@@ -2,6 +2,8 @@
 
 Mirror of shaders/mc/cubes.glsl: same names, same statements. GLSL reads the parameter block
 as a global `P` and the buffers as globals; here they are arguments. A GLSL uvec3 is three ints.
+The small helpers are inlined into their callers (inline="always"): the per-cube work is a few
+nanoseconds, so a call and the re-reading of P's fields would otherwise cost as much again.
 """
 from functools import lru_cache
 
@@ -11,29 +13,31 @@ from numba import njit
 from sphcore.mc.tables import CASE_WIDTH, EDGE_AXIS, EDGE_CORNERS
 
 f32 = np.float32
+u32 = np.uint32
 
 
-@njit
+@njit(inline="always")
 def sample_index(P, s_x, s_y, s_z):
     """Index of sample s in the volume."""
     return (s_x * int(P.dim[1]) + s_y) * int(P.dim[2]) + s_z
 
 
-@njit
+@njit(inline="always")
 def cube_origin(P, c):
-    """Sample coordinates of cube c's corner 0."""
-    ny = int(P.dim[1]) - 1
-    nz = int(P.dim[2]) - 1
-    return c // (ny * nz), c // nz % ny, c % nz
+    """Sample coordinates of cube c's corner 0 (by 32-bit unsigned division, as in GLSL)."""
+    ny = P.dim[1] - u32(1)
+    nz = P.dim[2] - u32(1)
+    c = u32(c)
+    return int(c // (ny * nz)), int(c // nz % ny), int(c % nz)
 
 
-@njit
+@njit(inline="always")
 def corner_offset(k):
     """Offset of corner k from corner 0 of its cube."""
     return k & 1, (k >> 1) & 1, (k >> 2) & 1
 
 
-@njit
+@njit(inline="always")
 def classify(P, volume, s_x, s_y, s_z):
     """Case of the cube with corner 0 at sample s: bit k set where corner k is inside."""
     code = 0
@@ -49,7 +53,7 @@ def cubes(spec):
     """(gradient, emit_vertex) with the options of `spec` (MIDPOINT, FORWARD_NORMALS) compiled in."""
     MIDPOINT, FORWARD_NORMALS = spec.MIDPOINT, spec.FORWARD_NORMALS
 
-    @njit
+    @njit(inline="always")
     def difference(P, volume, s, a):
         """Component a of the gradient at sample s (the body of gradient's loop over axes)."""
         lo_a = s[a]
@@ -69,7 +73,7 @@ def cubes(spec):
         return (volume[sample_index(P, hi[0], hi[1], hi[2])] - volume[sample_index(P, lo[0], lo[1], lo[2])]) / (
             f32(hi_a - lo_a) * P.spacing[a])
 
-    @njit
+    @njit(inline="always")
     def gradient(P, volume, s_x, s_y, s_z):
         """Gradient of the volume at sample s: central differences, one-sided on the volume's faces
         (FORWARD_NORMALS: forward differences, backward on the last sample), per axis over the spacing."""

@@ -7,7 +7,7 @@ Mirror of shaders/mc/pyramid.glsl: same names, same statements.
 from numba import njit
 
 
-@njit
+@njit(inline="always")
 def level_offset(P, l):
     """Offset of HistoPyramid level l in the pyramid buffer."""
     offset = 0
@@ -18,7 +18,7 @@ def level_offset(P, l):
     return offset
 
 
-@njit
+@njit(inline="always")
 def level_size(P, l):
     """Node count of HistoPyramid level l."""
     size = int(P.cube_total)
