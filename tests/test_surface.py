@@ -6,6 +6,7 @@ import os
 import numpy as np
 import pytest
 
+import sphcore
 from conftest import vulkan_or_skip
 from mc_reference import reference_marching_cubes
 from sphcore.surface import Extractor, marching_cubes, particle_surface, weld
@@ -97,7 +98,7 @@ def test_agrees_with_scikit_image(name):
     make, level = FIELDS[name]
     volume = make()
     spacing = (0.5, 0.7, 1.1)
-    verts, faces, normals = marching_cubes(volume, level, spacing)
+    verts, faces, normals = sphcore.marching_cubes(volume, level, spacing)  # the package-level entry point
     assert_valid(verts, faces, normals)
     sk_verts, sk_faces, sk_normals, _ = measure.marching_cubes(volume, level, spacing=spacing, method="lorensen")
     assert len(faces) == len(sk_faces) and len(verts) == len(sk_verts)
