@@ -55,10 +55,14 @@ def cmd_render(args):
     except ImportError:
         sys.exit("sphcore: error: `sphcore render` needs pyvista: pip install -e '.[render]'")
     from sphcore.render import render_run
+    from sphcore.scene import SceneError
 
     out = Path(args.out or Path(args.run_dir) / "render")
-    written = render_run(args.run_dir, out, backend=args.backend, spacing=args.spacing, level=args.level,
-                         particles=args.particles, every=args.every, mesh_format=args.format)
+    try:
+        written = render_run(args.run_dir, out, backend=args.backend, spacing=args.spacing, level=args.level,
+                             particles=args.particles, every=args.every, mesh_format=args.format)
+    except ValueError as e:  # e.g. a --spacing so fine that the sample grid is too large
+        raise SceneError(f"{args.run_dir}: {e}") from None
     print(f"wrote {len(written) // 2} frames ({args.format} meshes and PNGs) to {out}")
 
 
