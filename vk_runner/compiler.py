@@ -45,8 +45,8 @@ def compile_glsl(source, target_env="vulkan1.1"):
     source = Path(source).resolve()
     kind, path = find_compiler()
     digest = hashlib.sha256()
-    for f in [source, *sorted(source.parent.parent.glob("*/*.glsl"))]:
-        digest.update(f"{f.parent.name}/{f.name}".encode() + b"\0" + f.read_bytes() + b"\0")
+    for f in [source, *sorted(source.parent.parent.rglob("*.glsl"))]:
+        digest.update(str(f.relative_to(source.parent.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
     digest.update(" ".join(_command(kind, path, Path("s"), Path("o"), target_env)).encode())
     cached = cache_dir() / f"{source.stem}-{digest.hexdigest()[:24]}.spv"
     if cached.is_file():

@@ -8,7 +8,7 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "tables.glsl"
-#include "pyramid.glsl"
+#include "../pyramid.glsl"
 
 layout(std430, binding = 0) readonly buffer Volume { float volume[]; };
 layout(std430, binding = 1) readonly buffer CubeCase { uint cube_case[]; };
@@ -31,7 +31,7 @@ void main() {
     uint node = 0u;
     uint start = 0u;
     for (int l = int(P.levels) - 1; l >= 0; --l) {
-        uint offset = level_offset(uint(l));
+        uint offset = level_offset(P.cube_total, uint(l));
         uint child = 8u * node;
         uint count = cube_pyramid[offset + child];
         for (uint k = 0u; k < 7u && v >= start + count; ++k) {

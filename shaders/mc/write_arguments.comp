@@ -6,7 +6,7 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
-#include "pyramid.glsl"
+#include "../pyramid.glsl"
 
 layout(std430, binding = 2) readonly buffer CubePyramid { uint cube_pyramid[]; };
 layout(std430, binding = 3) writeonly buffer Arguments { uint arguments[]; };
@@ -18,7 +18,7 @@ void main() {
     if (gl_GlobalInvocationID.x != 0u) return;
     // [2] vertices to emit: all of them, or as many as the output holds (the host sees the
     //     total in arguments[3], enlarges the output and runs again: nothing is cut silently)
-    uint total = cube_pyramid[level_offset(P.levels)];
+    uint total = cube_pyramid[level_offset(P.cube_total, P.levels)];
     uint groups = (min(total, P.capacity) + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
     // [3] (x, y, z) work groups, x at most MAX_GROUPS_X; then the total
     arguments[0] = min(groups, MAX_GROUPS_X);

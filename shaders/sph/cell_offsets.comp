@@ -7,6 +7,7 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "cells.glsl"
+#include "../pyramid.glsl"
 
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) writeonly buffer CellStart { uint cell_start[]; };
@@ -21,7 +22,7 @@ void main() {
     uint start = 0u;
     for (int l = int(P.levels) - 1; l >= 0; --l) {
         uint ancestor = c >> (3u * uint(l));
-        uint offset = level_offset(uint(l));
+        uint offset = level_offset(P.cell_total, uint(l));
         for (uint s = ancestor & ~7u; s < ancestor; ++s) {
             start += cell_pyramid[offset + s];
         }
@@ -29,5 +30,5 @@ void main() {
     cell_start[c] = start;
     // [3] the top of the pyramid must hold every particle exactly once; a mismatch is counted
     //     in grid_status[2] (an overflow or a lost particle: never silently accepted)
-    if (c == 0u && cell_pyramid[level_offset(P.levels)] != P.n) atomicAdd(grid_status[2], 1u);
+    if (c == 0u && cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n) atomicAdd(grid_status[2], 1u);
 }

@@ -5,8 +5,8 @@
 // coordinate can never put two particles closer than h more than one cell apart), counted from
 // P.box_min. With walls the grid covers the box; in an open domain cell coordinates wrap modulo
 // P.grid_dim (spatial hashing, seed 2): far-apart cells share a bucket, which is harmless because
-// every pair's distance is tested against h. The HistoPyramid over the per-cell counts lives in
-// one buffer, level 0 (the counts) first; each level above holds the sums of 8 consecutive nodes.
+// every pair's distance is tested against h. The HistoPyramid over the per-cell counts has the
+// cells as its base (shaders/pyramid.glsl).
 
 const int CELL_LIMIT = 1 << 24;  // |cell coordinate| beyond this: outside the hashed range
 
@@ -70,23 +70,4 @@ bool range_cells(ivec3 base, uint k, out int first, out int last) {
     first = cell_index(c);
     last = cell_index(c_last);
     return first >= 0;
-}
-
-// Offset of HistoPyramid level l in the pyramid buffer, and its node count.
-uint level_offset(uint l) {
-    uint offset = 0u;
-    uint size = P.cell_total;
-    for (uint k = 0u; k < l; ++k) {
-        offset += size;
-        size = (size + 7u) / 8u;
-    }
-    return offset;
-}
-
-uint level_size(uint l) {
-    uint size = P.cell_total;
-    for (uint k = 0u; k < l; ++k) {
-        size = (size + 7u) / 8u;
-    }
-    return size;
 }

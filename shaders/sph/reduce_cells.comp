@@ -7,22 +7,23 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "cells.glsl"
+#include "../pyramid.glsl"
 
 layout(std430, binding = 8) buffer CellPyramid { uint cell_pyramid[]; };
 
 void main() {
     // [1] one invocation per node of level P.level
     uint node = gl_GlobalInvocationID.x;
-    uint size = level_size(P.level);
+    uint size = level_size(P.cell_total, P.level);
     if (node >= size) return;
     // [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
-    uint below = level_offset(P.level - 1u);
-    uint below_size = level_size(P.level - 1u);
+    uint below = level_offset(P.cell_total, P.level - 1u);
+    uint below_size = level_size(P.cell_total, P.level - 1u);
     uint sum = 0u;
     for (uint k = 0u; k < 8u; ++k) {
         uint child = 8u * node + k;
         if (child < below_size) sum += cell_pyramid[below + child];
     }
     // [3] store
-    cell_pyramid[level_offset(P.level) + node] = sum;
+    cell_pyramid[level_offset(P.cell_total, P.level) + node] = sum;
 }

@@ -10,7 +10,7 @@ from functools import lru_cache
 from numba import njit
 
 from sphcore.mc.cubes import cubes
-from sphcore.mc.pyramid import level_offset
+from sphcore.pyramid import level_offset
 from sphcore.workgroups import launcher
 
 
@@ -30,7 +30,7 @@ def emit_vertices(spec):
         node = 0
         start = 0
         for l in range(int(P.levels) - 1, -1, -1):
-            offset = level_offset(P, l)
+            offset = level_offset(P.cube_total, l)
             child = 8 * node
             count = cube_pyramid[offset + child]
             k = 0

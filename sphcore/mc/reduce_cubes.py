@@ -7,7 +7,7 @@ from functools import lru_cache
 
 from numba import njit
 
-from sphcore.mc.pyramid import level_offset, level_size
+from sphcore.pyramid import level_offset, level_size
 from sphcore.workgroups import launcher
 
 
@@ -17,18 +17,18 @@ def reduce_cubes(spec):
     def reduce_cubes_main(node, params, cube_pyramid):
         P = params[0]
         # [1] one invocation per node of level P.level
-        size = level_size(P, P.level)
+        size = level_size(P.cube_total, P.level)
         if node >= size:
             return
         # [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
-        below = level_offset(P, P.level - 1)
-        below_size = level_size(P, P.level - 1)
+        below = level_offset(P.cube_total, P.level - 1)
+        below_size = level_size(P.cube_total, P.level - 1)
         total = 0
         for k in range(8):
             child = 8 * node + k
             if child < below_size:
                 total += cube_pyramid[below + child]
         # [3] store
-        cube_pyramid[level_offset(P, P.level) + node] = total
+        cube_pyramid[level_offset(P.cube_total, P.level) + node] = total
 
     return launcher(reduce_cubes_main)

@@ -8,7 +8,7 @@ from functools import lru_cache
 
 from numba import njit
 
-from sphcore.mc.pyramid import level_offset
+from sphcore.pyramid import level_offset
 from sphcore.workgroups import launcher
 
 MAX_GROUPS_X = 65535  # the least maxComputeWorkGroupCount[0] Vulkan allows
@@ -24,7 +24,7 @@ def write_arguments(spec):
             return
         # [2] vertices to emit: all of them, or as many as the output holds (the host sees the
         #     total in arguments[3], enlarges the output and runs again: nothing is cut silently)
-        total = cube_pyramid[level_offset(P, P.levels)]
+        total = cube_pyramid[level_offset(P.cube_total, P.levels)]
         groups = (min(total, P.capacity) + local_size - 1) // local_size
         # [3] (x, y, z) work groups, x at most MAX_GROUPS_X; then the total
         arguments[0] = min(groups, MAX_GROUPS_X)

@@ -8,7 +8,7 @@ from functools import lru_cache
 
 from numba import njit
 
-from sphcore.sph.cells import level_offset
+from sphcore.pyramid import level_offset
 from sphcore.workgroups import launcher
 
 
@@ -25,13 +25,13 @@ def cell_offsets(spec):
         start = 0
         for l in range(int(P.levels) - 1, -1, -1):
             ancestor = c >> (3 * l)
-            offset = level_offset(P, l)
+            offset = level_offset(P.cell_total, l)
             for s in range(ancestor & ~7, ancestor):
                 start += cell_pyramid[offset + s]
         cell_start[c] = start
         # [3] the top of the pyramid must hold every particle exactly once; a mismatch is counted
         #     in grid_status[2] (an overflow or a lost particle: never silently accepted)
-        if c == 0 and cell_pyramid[level_offset(P, P.levels)] != P.n:
+        if c == 0 and cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n:
             grid_status[2] += 1
 
     return launcher(cell_offsets_main)

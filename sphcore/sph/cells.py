@@ -89,23 +89,3 @@ def cells(spec):
         return first >= 0, first, last
 
     return cell_of, cell_index, near_walls, reflected, range_count, range_cells
-
-
-@njit
-def level_offset(P, l):
-    """Offset of HistoPyramid level l in the pyramid buffer."""
-    offset = 0
-    size = int(P.cell_total)
-    for k in range(l):
-        offset += size
-        size = (size + 7) // 8
-    return offset
-
-
-@njit
-def level_size(P, l):
-    """Node count of HistoPyramid level l."""
-    size = int(P.cell_total)
-    for k in range(l):
-        size = (size + 7) // 8
-    return size

@@ -7,7 +7,7 @@ from functools import lru_cache
 
 from numba import njit
 
-from sphcore.sph.cells import level_offset, level_size
+from sphcore.pyramid import level_offset, level_size
 from sphcore.workgroups import launcher
 
 
@@ -17,18 +17,18 @@ def reduce_cells(spec):
     def reduce_cells_main(node, params, cell_pyramid):
         P = params[0]
         # [1] one invocation per node of level P.level
-        size = level_size(P, P.level)
+        size = level_size(P.cell_total, P.level)
         if node >= size:
             return
         # [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
-        below = level_offset(P, P.level - 1)
-        below_size = level_size(P, P.level - 1)
+        below = level_offset(P.cell_total, P.level - 1)
+        below_size = level_size(P.cell_total, P.level - 1)
         total = 0
         for k in range(8):
             child = 8 * node + k
             if child < below_size:
                 total += cell_pyramid[below + child]
         # [3] store
-        cell_pyramid[level_offset(P, P.level) + node] = total
+        cell_pyramid[level_offset(P.cell_total, P.level) + node] = total
 
     return launcher(reduce_cells_main)

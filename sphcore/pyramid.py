@@ -1,17 +1,18 @@
-"""HistoPyramid over the cubes' vertex counts, in one buffer: level 0 (one count per cube)
+"""HistoPyramid helpers shared by the neighbour grid (over the cells' particle counts) and by
+marching cubes (over the cubes' vertex counts): one buffer holds level 0, `base` nodes,
 first; each level above holds the sums of 8 consecutive nodes of the level below, up to one
-node, the total (as shaders/sph/cells.glsl's pyramid over the cells).
+node, the total.
 
-Mirror of shaders/mc/pyramid.glsl: same names, same statements.
+Mirror of shaders/pyramid.glsl: same names, same statements.
 """
 from numba import njit
 
 
 @njit(inline="always")
-def level_offset(P, l):
+def level_offset(base, l):
     """Offset of HistoPyramid level l in the pyramid buffer."""
     offset = 0
-    size = int(P.cube_total)
+    size = int(base)
     for k in range(l):
         offset += size
         size = (size + 7) // 8
@@ -19,9 +20,9 @@ def level_offset(P, l):
 
 
 @njit(inline="always")
-def level_size(P, l):
+def level_size(base, l):
     """Node count of HistoPyramid level l."""
-    size = int(P.cube_total)
+    size = int(base)
     for k in range(l):
         size = (size + 7) // 8
     return size
