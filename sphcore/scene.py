@@ -19,6 +19,24 @@ except ModuleNotFoundError:  # Python 3.10
 from sphcore.params import CELL_PADDING, MAX_CELLS, Spec, fold_parameters, lattice_mass
 
 
+def stable_dt(scene, max_speed=0.0):
+    """Largest stable time step [s] and the bound that sets it.
+
+    CFL: 0.25 h / (c + |v|max), c = sqrt(k); viscous: 0.125 h^2 rho_0 / mu; body force:
+    0.25 sqrt(h / |g|) (Monaghan 1992; Morris et al. 1997). Terms switched off in physics.* do
+    not bound it.
+    """
+    h = scene.h
+    bounds = {"CFL": 0.25 * h / (math.sqrt(scene["fluid.stiffness"]) + max_speed)}
+    if scene["fluid.viscosity"] > 0 and scene["physics.viscosity"]:
+        bounds["viscous"] = 0.125 * h * h * scene["fluid.rest_density"] / scene["fluid.viscosity"]
+    g = math.sqrt(sum(c * c for c in scene["forces.gravity"]))
+    if g > 0 and scene["physics.gravity"]:
+        bounds["force"] = 0.25 * math.sqrt(h / g)
+    name = min(bounds, key=bounds.get)
+    return bounds[name], name
+
+
 class SceneError(ValueError):
     """A scene that cannot be run; the message names the file and the key."""
 
@@ -30,7 +48,7 @@ class Key:
     low: float
     high: float
     doc: str
-    kind: str = "float"  # float | int | vec | str | bool | blocks | one of "a|b|c"
+    kind: str = "float"  # float | int | vec | str | bool | blocks | dt (a float or "auto") | one of "a|b|c"
 
 
 SCHEMA = {
@@ -45,6 +63,8 @@ SCHEMA = {
         "surface_tension": Key(False, "", 0, 0, "cohesion of Becker & Teschner 2007 (coefficient "
                                "fluid.cohesion)", "bool"),
         "gravity": Key(True, "", 0, 0, "the gravity term (vector forces.gravity)", "bool"),
+        "precision": Key("float32", "", 0, 0, "float32, or float64 particle buffers and arithmetic (the "
+                         "Vulkan device must support shaderFloat64)", "float32|float64"),
     },
     "domain": {
         "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls (open: origin of the hashed grid)", "vec"),
@@ -71,9 +91,13 @@ SCHEMA = {
         "restitution": Key(0.3, "-", 0.0, 1.0, "fraction of the normal speed kept when a particle hits a wall"),
     },
     "time": {
-        "dt": Key(1e-4, "s", 1e-8, 1.0, "time step"),
+        "dt": Key(1e-4, "s", 1e-8, 1.0, 'time step, or "auto": dt_fraction times the stability bound '
+                  "(CFL, viscous, body force; see stable_dt)", "dt"),
+        "dt_fraction": Key(1.0, "-", 0.01, 10.0, 'fraction of the stability bound taken by dt = "auto"'),
         "steps": Key(5000, "steps", 1, 1e9, "steps to run unless --steps is given", "int"),
         "output_every": Key(250, "steps", 1, 1e9, "steps between snapshots", "int"),
+        "checkpoint_every": Key(1000, "steps", 1, 1e9, "steps between checkpoints (what `sphcore run --resume` "
+                                "continues from)", "int"),
     },
 }
 
@@ -90,6 +114,8 @@ def _check(where, key, value):
         if value not in key.kind.split("|"):
             raise SceneError(f"{where} = {value!r}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
         return value
+    if key.kind == "dt" and value == "auto":
+        return value
     if key.kind == "bool":
         if not isinstance(value, bool):
             raise SceneError(f"{where}: expected true or false, got {value!r}")
@@ -97,9 +123,10 @@ def _check(where, key, value):
     if key.kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             raise SceneError(f"{where}: expected an integer ({key.unit}), got {value!r}")
-    elif key.kind == "float":
+    elif key.kind in ("float", "dt"):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SceneError(f"{where}: expected a number ({key.unit}), got {value!r}")
+            expected = 'a number or "auto"' if key.kind == "dt" else "a number"
+            raise SceneError(f"{where}: expected {expected} ({key.unit}), got {value!r}")
         value = float(value)
     elif key.kind == "vec":
         if (not isinstance(value, list) or len(value) not in (2, 3)
@@ -184,6 +211,27 @@ class Scene:
         return self["physics.dimension"]
 
     @property
+    def dt(self):
+        """The time step [s]: time.dt, or time.dt_fraction of the stability bound where it is "auto"."""
+        if self["time.dt"] == "auto":
+            return self["time.dt_fraction"] * stable_dt(self, self.speed_estimate())[0]
+        return self["time.dt"]
+
+    def speed_estimate(self):
+        """The fastest flow to expect [m/s]: free fall from the top of the fluid to the floor,
+        sqrt(2 |g| height) (0 without gravity)."""
+        g = self["forces.gravity"]
+        g_norm = math.sqrt(sum(c * c for c in g)) if self["physics.gravity"] else 0.0
+        if g_norm == 0:
+            return 0.0
+        down = [c / g_norm for c in g]
+        lo, hi = self["domain.box_min"], self["domain.box_max"]
+        floor = sum(d * (h if d > 0 else l) for d, l, h in zip(down, lo, hi))  # the wall gravity points at
+        top = min(sum(d * (b["min"][a] if d > 0 else b["max"][a]) for a, d in enumerate(down))
+                  for b in self["fluid.blocks"])
+        return math.sqrt(2.0 * g_norm * max(floor - top, 0.0))
+
+    @property
     def h(self):
         return self["fluid.spacing"] * self["fluid.smoothing_ratio"]
 
@@ -260,7 +308,7 @@ class Scene:
         return fold_parameters(
             n=n, dim=self.dim, h=self.h, mass=self.mass, rest_density=self["fluid.rest_density"],
             stiffness=self["fluid.stiffness"], tait=self["physics.equation_of_state"] == "tait",
-            viscosity=self["fluid.viscosity"], cohesion=self["fluid.cohesion"], dt=self["time.dt"],
+            viscosity=self["fluid.viscosity"], cohesion=self["fluid.cohesion"], dt=self.dt,
             restitution=self["walls.restitution"], gravity=self["forces.gravity"],
             box_min=self["domain.box_min"], box_max=self["domain.box_max"], grid_dim=self.grid_dim)
 

@@ -1,31 +1,14 @@
 """Run a scene on a backend: step, check, write snapshots and the final state."""
-import math
 from pathlib import Path
 
 import numpy as np
 
 from sphcore.backends import empty_state, in_particle_order, make_backend, plan
+from sphcore.scene import stable_dt
 
 
 class SimulationError(RuntimeError):
     """The state became non-finite or left the box; the message names step, particle and likely cause."""
-
-
-def stable_dt(scene, max_speed=0.0):
-    """Largest stable time step [s] and the bound that sets it.
-
-    CFL: 0.25 h / (c + |v|max), c = sqrt(k); viscous: 0.125 h^2 rho_0 / mu; body force:
-    0.25 sqrt(h / |g|) (Monaghan 1992; Morris et al. 1997).
-    """
-    h = scene.h
-    bounds = {"CFL": 0.25 * h / (math.sqrt(scene["fluid.stiffness"]) + max_speed)}
-    if scene["fluid.viscosity"] > 0:
-        bounds["viscous"] = 0.125 * h * h * scene["fluid.rest_density"] / scene["fluid.viscosity"]
-    g = math.hypot(*scene["forces.gravity"])
-    if g > 0:
-        bounds["force"] = 0.25 * math.sqrt(h / g)
-    name = min(bounds, key=bounds.get)
-    return bounds[name], name
 
 
 class Simulation:
@@ -68,7 +51,7 @@ class Simulation:
                      else f"beyond the hashed range (+-2^24 cells of {self.scene.h:g} m)")
             raise SimulationError(f"{steps}: {int(status[0])} particle position(s) were {where} or not finite "
                                   f"(the first: particle {int(status[1])}); likely cause: a blow-up "
-                                  f"(time.dt = {self.scene['time.dt']:g} s, estimated bound {stable_dt(self.scene)[0]:.3g} s)")
+                                  f"(dt = {self.scene.dt:g} s, estimated bound {stable_dt(self.scene)[0]:.3g} s)")
         if status[2]:
             raise SimulationError(f"{steps}: the neighbour grid counted a different number of particles than "
                                   f"{self.n} in {int(status[2])} steps (a counter overflow): please report this")
@@ -80,7 +63,7 @@ class Simulation:
             if bad.any():
                 i = int(np.argmax(bad))
                 dt_max, bound = stable_dt(self.scene)
-                dt = self.scene["time.dt"]
+                dt = self.scene.dt
                 cause = (f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s" if dt > dt_max else
                          f"time.dt = {dt:g} s is within the estimated bound {dt_max:.3g} s ({bound}); "
                          "look for stiffness or viscosity at the ends of their ranges")
