@@ -230,9 +230,11 @@ class Context:
     physical-device list, or a substring of the device name; $SPHCORE_VK_DEVICE sets it too.
     validation: enable VK_LAYER_KHRONOS_validation and collect its messages in
     `self.validation_messages` ($SPHCORE_VK_VALIDATION=1 sets it too).
+    float64: the shaders will use doubles (physics.precision = "float64"): a device without
+    shaderFloat64 is a VulkanError. The feature is enabled wherever the device has it.
     """
 
-    def __init__(self, device=None, validation=None):
+    def __init__(self, device=None, validation=None, float64=False):
         self.vk = vk = load_vulkan()
         if device is None:
             device = os.environ.get("SPHCORE_VK_DEVICE") or None
@@ -249,15 +251,20 @@ class Context:
         self.device_name = _text(props.deviceName)
         self.device_type = self._type_name(props.deviceType)
         self.max_storage_buffer_range = int(props.limits.maxStorageBufferRange)
+        self.shader_float64 = self._supports_float64()
+        if float64 and not self.shader_float64:
+            raise VulkanError(f"{self.device_name} has no float64 in shaders (shaderFloat64): set "
+                              'physics.precision = "float32", pick another device, or run with --backend numba')
         self.memory_properties = vk.vkGetPhysicalDeviceMemoryProperties(self.physical_device)
         families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
         self.queue_family = next(i for i, f in enumerate(families) if f.queueFlags & vk.VK_QUEUE_COMPUTE_BIT)
         queue_info = vk.VkDeviceQueueCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO, queueFamilyIndex=self.queue_family,
             queueCount=1, pQueuePriorities=[1.0])
+        features = vk.VkPhysicalDeviceFeatures(shaderFloat64=self.shader_float64)
         self.device = vk.vkCreateDevice(self.physical_device, vk.VkDeviceCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO, queueCreateInfoCount=1,
-            pQueueCreateInfos=[queue_info]), None)
+            pQueueCreateInfos=[queue_info], pEnabledFeatures=features), None)
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
@@ -303,6 +310,10 @@ class Context:
                 pfnUserCallback=on_message), None)
             _CALLBACKS.append((on_message, messenger))
         return instance
+
+    def _supports_float64(self):
+        """Whether the chosen device runs shaders with doubles (feature shaderFloat64)."""
+        return bool(self.vk.vkGetPhysicalDeviceFeatures(self.physical_device).shaderFloat64)
 
     def _type_name(self, device_type):
         vk = self.vk
