@@ -1,6 +1,8 @@
-"""Command line: `sphcore run SCENE`, `sphcore keys`, `sphcore plot RUN_DIR`, `sphcore render RUN_DIR`."""
+"""Command line: `sphcore run SCENE`, `sphcore run --resume RUN_DIR`, `sphcore keys`, `sphcore plot RUN_DIR`,
+`sphcore render RUN_DIR`."""
 import argparse
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -18,16 +20,27 @@ def scene_path(name):
 
 def cmd_run(args):
     from sphcore.scene import Scene
-    from sphcore.simulation import run
+    from sphcore.simulation import CheckpointError, load_checkpoint, run
 
-    scene = Scene.load(scene_path(args.scene))
+    scene = Scene.load(scene_path(args.scene)) if args.scene else None
+    checkpoint = None
+    if args.resume:
+        out = Path(args.resume)
+        stored, checkpoint = load_checkpoint(out)
+        if scene is not None and scene.config != stored.config:
+            raise CheckpointError(f"{args.scene} is not the scene of the run in {out} (its scene.json): "
+                                  f"leave SCENE out to continue that run")
+        scene = stored
+    else:
+        out = Path(args.out or Path("runs") / scene["name"])
+    backend = args.backend or (str(checkpoint["backend"]) if checkpoint is not None else "numba")
     options = {"local_size": args.local_size}
-    if args.backend == "vulkan":
+    if backend == "vulkan":
         options.update(device=args.device, validation=args.validation or None)
-    out = Path(args.out or Path("runs") / scene["name"])
-    arrays = run(scene, args.backend, steps=args.steps, out_dir=out, **options)
-    print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps, t = {float(arrays['time']):.4g} s "
-          f"-> {out}/final.npz, {out}/{scene['name']}.pvd")
+    arrays = run(scene, backend, steps=args.steps, out_dir=out, checkpoint=checkpoint, **options)
+    resumed = f" (resumed at step {int(checkpoint['step'])})" if checkpoint is not None else ""
+    print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed}, "
+          f"t = {float(arrays['time']):.4g} s -> {out}/final.npz, {out}/{scene['name']}.pvd")
 
 
 def cmd_keys(args):
@@ -69,10 +82,13 @@ def cmd_render(args):
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="sphcore", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("run", help="run a scene (a .toml file or the name of one in scenes/)")
-    p.add_argument("scene")
-    p.add_argument("--backend", choices=["numba", "vulkan"], default="numba")
-    p.add_argument("--steps", type=int, help="total steps (default: the scene's time.steps)")
+    p = sub.add_parser("run", help="run a scene (a .toml file or the name of one in scenes/), or --resume a run")
+    p.add_argument("scene", nargs="?")
+    p.add_argument("--resume", metavar="RUN_DIR",
+                   help="continue the run in RUN_DIR from its checkpoint (its scene, backend and folder)")
+    p.add_argument("--backend", choices=["numba", "vulkan"],
+                   help="numba (default) or vulkan; with --resume: the checkpoint's")
+    p.add_argument("--steps", type=int, help="total steps, counted from the run's start (default: the scene's time.steps)")
     p.add_argument("--out", help="output folder (default: runs/<scene name>)")
     p.add_argument("--local-size", type=int, default=128, help="work-group size (specialization constant)")
     p.add_argument("--device", help="Vulkan device: index or part of its name (default: a discrete GPU, else any)")
@@ -94,11 +110,17 @@ def main(argv=None):
     p.add_argument("--every", type=int, default=1, help="render every K-th snapshot (default 1: all)")
     p.add_argument("--format", choices=["vtp", "ply"], default="vtp", help="mesh file format (default vtp)")
     p.set_defaults(func=cmd_render)
+    from sphcore.validate.cli import add_commands
+    add_commands(sub)  # validate, sweep, report
     args = parser.parse_args(argv)
+    if args.command == "run" and not args.scene and not args.resume:
+        parser.error("run: give a SCENE, or --resume RUN_DIR")
+    if getattr(args, "resume", None) and args.out:
+        parser.error("--out cannot be combined with --resume: the run continues in RUN_DIR")
     if getattr(args, "steps", None) is not None and args.steps < 0:
         parser.error(f"--steps must be >= 0, got {args.steps}")
-    if getattr(args, "local_size", 1) < 1:
-        parser.error(f"--local-size must be >= 1, got {args.local_size}")
+    if not 1 <= getattr(args, "local_size", 1) <= 1024:
+        parser.error(f"--local-size must be within [1, 1024] (a work group), got {args.local_size}")
     if getattr(args, "every", 1) < 1:
         parser.error(f"--every must be >= 1, got {args.every}")
     if getattr(args, "spacing", None) is not None and not args.spacing > 0:
@@ -116,9 +138,12 @@ def main(argv=None):
     except BrokenPipeError:  # output piped into a reader that stopped early (`sphcore keys | head`)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except KeyboardInterrupt:
-        print("sphcore: interrupted; files written so far are complete", file=sys.stderr)
-        return 130
+    except OSError as e:  # a folder that is a file, a full disk, no permission: files already written are kept
+        print(f"sphcore: error: {e.filename + ': ' if e.filename else ''}{e.strerror or e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (sphcore.simulation.Interrupted)
+        print(f"sphcore: {str(e) or 'interrupted; files written so far are complete'}", file=sys.stderr)
+        return 128 + getattr(e, "signum", signal.SIGINT)
     return 0
 
 

@@ -1,4 +1,16 @@
-"""Run a scene on a backend: step, check, write snapshots and the final state."""
+"""Run a scene on a backend: step, check, write snapshots, checkpoints and the final state.
+
+A run survives being stopped: every time.checkpoint_every steps (and at the start, at the end,
+and where SIGINT or SIGTERM stops it) DIR/checkpoint.npz holds what `resume` needs to continue
+to bitwise the same final state as a run that was never stopped, on the same backend and device.
+Every file is written to a temporary name and renamed, so a reader (or a resume) never sees
+half of one.
+"""
+import json
+import signal
+import sys
+import threading
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +23,30 @@ class SimulationError(RuntimeError):
     """The state became non-finite or left the box; the message names step, particle and likely cause."""
 
 
+class CheckpointError(SimulationError):
+    """A run that cannot be resumed: no checkpoint, an unreadable one, or one that does not belong
+    to the scene (or to this version's parameter block); the message names the file."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM stopped a run; `signum` is the signal (a shell's exit status is 128 + it)."""
+
+    def __init__(self, signum, message=None):
+        self.signum = signum
+        super().__init__(message or f"interrupted by {signal.Signals(signum).name}; files written so far are complete")
+
+
+CHECKPOINT = "checkpoint.npz"
+# The buffers that carry the state from one step to the next (and the outputs of the last one);
+# every other buffer is rewritten by each step before any stage reads it.
+CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p", "particle_id", "grid_status")
+
+
 class Simulation:
-    """A scene's particles on one backend. `advance(k)` runs k steps; `read()` checks and returns the state."""
+    """A scene's particles on one backend. `advance(k)` runs k steps; `read()` checks and returns the state;
+    `checkpoint()` and `restore(arrays)` save and put back everything a later step depends on."""
+
+    _carried = None  # the CARRIED buffers as the last read() saw them
 
     def __init__(self, scene, backend="numba", **backend_options):
         self.scene = scene
@@ -41,7 +75,43 @@ class Simulation:
         self.check(state)
         self.check_grid(raw["grid_status"])
         self.checked_step = self.step_count
+        self._carried = {name: raw[name] for name in CARRIED}
         return state
+
+    @property
+    def device_name(self):
+        """Where the steps run: the Vulkan device's name, or "cpu" for the numba mirrors."""
+        ctx = getattr(self.backend, "ctx", None)
+        return ctx.device_name if ctx is not None else "cpu"
+
+    def checkpoint(self):
+        """The arrays of a checkpoint at the current step (read and checked first: a blown-up state
+        is never saved). The buffers are kept in the backend's order, not in particle order: the
+        grid orders each cell's particles by their previous index, so a state put back in particle
+        order would continue with its sums in another order, a few ulps away."""
+        if self._carried is None or self.checked_step != self.step_count:
+            self.read()
+        arrays = {f"buffer_{name}": values for name, values in self._carried.items()}
+        # the parameter block as its bytes: numpy's .npy writer leaves a record's padding uninitialised
+        arrays.update(step=np.int64(self.step_count), scene=np.array(self.scene.to_json()),
+                      params=self.params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
+        return arrays
+
+    def restore(self, arrays):
+        """Continue from `arrays` (of `checkpoint()`, possibly on another backend): its buffers
+        replace the backend's, its step becomes the step count."""
+        current = self.backend.read()
+        for name in CARRIED:
+            values = arrays[f"buffer_{name}"]
+            if values.shape != current[name].shape or values.dtype != current[name].dtype:
+                raise CheckpointError(f"checkpoint buffer {name} is {values.dtype}{list(values.shape)}, this scene "
+                                      f"needs {current[name].dtype}{list(current[name].shape)}")
+            if self.backend.name == "vulkan":
+                self.backend.buffers[name].write(values)
+            else:
+                self.backend.state[name][...] = values
+        self.step_count = self.checked_step = int(arrays["step"])
+        self._carried = None
 
     def check_grid(self, status):
         """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
@@ -103,42 +173,186 @@ def final_arrays(sim, state):
     return arrays
 
 
-def run(scene, backend="numba", steps=None, out_dir=None, progress=True, **backend_options):
-    """Run `scene`, writing snapshots (VTK .vtp + .pvd) and final.npz to `out_dir`; return final arrays.
+class _Signals:
+    """SIGINT and SIGTERM for the length of a run (main thread only; a signal set to be ignored
+    stays ignored). While `hold` is off (before the first step) a signal stops the run at once;
+    once on, the first signal is only noted, and the run stops at the next step boundary, where
+    the state is whole and a checkpoint can be written; a second signal stops it at once (files
+    stay complete: each is written under a temporary name and renamed)."""
 
-    Snapshots go out every time.output_every steps and at the end. A blow-up raises
-    SimulationError after the last good snapshot; files already written are kept.
+    def __init__(self):
+        self.received, self.hold, self._previous = None, False, {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                if signal.getsignal(signum) is not signal.SIG_IGN:
+                    self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def _handle(self, signum, frame):
+        if self.hold and self.received is None:
+            self.received = signum
+            return
+        raise Interrupted(signum)
+
+
+def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpoint=None, **backend_options):
+    """Run `scene` for `steps` steps in all, writing snapshots (VTK .vtp + .pvd), checkpoints and
+    final.npz to `out_dir`; return the final arrays. `checkpoint`: arrays of load_checkpoint to
+    start from (see `resume`).
+
+    Snapshots go out every time.output_every steps and at the end; checkpoints at the start,
+    every time.checkpoint_every steps and at the end. A blow-up raises SimulationError after
+    the last good snapshot; SIGINT or SIGTERM raises Interrupted after a checkpoint at the step
+    reached; a Vulkan failure raises VulkanError naming the checkpoint to resume from. Files
+    already written are kept.
     """
     from tqdm import tqdm
 
     from sphcore.output import SnapshotSeries, atomic_savez, atomic_write_bytes
+    from vk_runner import VulkanError
 
     steps = scene["time.steps"] if steps is None else steps
     out_dir = Path(out_dir or Path("runs") / scene["name"])
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(out_dir / "scene.json", scene.to_json().encode())  # what `sphcore render` reads
-    series = SnapshotSeries(out_dir, scene["name"])
-    every = scene["time.output_every"]
-    sim = Simulation(scene, backend, **backend_options)
-    try:
+    if checkpoint is not None and steps < int(checkpoint["step"]):
+        raise CheckpointError(f"{out_dir / CHECKPOINT} is at step {int(checkpoint['step'])}, past the {steps} "
+                              f"steps asked for: give --steps {int(checkpoint['step'])} or more")
+    every, checkpoint_every = scene["time.output_every"], scene["time.checkpoint_every"]
+    with _Signals() as signals:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        if checkpoint is None:
+            atomic_write_bytes(out_dir / "scene.json", scene.to_json().encode())  # what render and resume read
+        series = SnapshotSeries(out_dir, scene["name"])
+        sim = Simulation(scene, backend, **backend_options)
+        saved = None  # the step of the last checkpoint written or resumed from
+
         def snapshot(state):
             series.add(sim.step_count, sim.time, state["particle_x"], {
                 "velocity": state["particle_v"], "density": state["particle_rho"],
                 "pressure": state["particle_p"]})
 
-        state = sim.read()
-        snapshot(state)
-        chunk = max(1, min(every, 50))
-        with tqdm(total=steps, unit="step", disable=not progress, desc=f"{scene['name']} [{backend}]") as bar:
-            while sim.step_count < steps:
-                k = min(chunk, steps - sim.step_count, every - sim.step_count % every)
-                sim.advance(k)
-                bar.update(k)
-                if sim.step_count % every == 0 or sim.step_count == steps:
-                    state = sim.read()
-                    snapshot(state)
-        arrays = final_arrays(sim, state)
-        atomic_savez(out_dir / "final.npz", **arrays)
-        return arrays
-    finally:
+        def save_checkpoint():
+            nonlocal saved
+            atomic_savez(out_dir / CHECKPOINT, **sim.checkpoint())
+            saved = sim.step_count
+
+        try:
+            if checkpoint is not None:
+                sim.restore(checkpoint)
+                saved = sim.step_count
+                note_resume(checkpoint, sim, out_dir)
+            signals.hold = True
+            state = sim.read()
+            if checkpoint is None:
+                snapshot(state)
+                save_checkpoint()
+            chunk = max(1, min(every, 50))
+            with tqdm(total=steps, initial=sim.step_count, unit="step", disable=not progress,
+                      desc=f"{scene['name']} [{backend}]") as bar:
+                while sim.step_count < steps:
+                    k = min(chunk, steps - sim.step_count, every - sim.step_count % every,
+                            checkpoint_every - sim.step_count % checkpoint_every)
+                    sim.advance(k)
+                    bar.update(k)
+                    if sim.step_count % every == 0 or sim.step_count == steps:
+                        state = sim.read()
+                        snapshot(state)
+                    if sim.step_count % checkpoint_every == 0 or sim.step_count == steps or signals.received:
+                        save_checkpoint()
+                    if signals.received:
+                        raise Interrupted(signals.received, f"interrupted by {signal.Signals(signals.received).name} "
+                                          f"at step {sim.step_count} of {steps}; checkpoint written: continue "
+                                          f"with `sphcore run --resume {out_dir}`")
+            arrays = final_arrays(sim, state)
+            atomic_savez(out_dir / "final.npz", **arrays)
+        except BaseException as e:
+            try:
+                sim.close()
+            except Exception:
+                pass  # a lost device fails to close too: the first error is the one to report
+            if isinstance(e, VulkanError) and saved is not None:
+                raise VulkanError(f"{e}; the checkpoint at step {saved} is intact: continue with `sphcore run "
+                                  f"--resume {out_dir}` (add --backend numba to continue on the CPU)") from None
+            raise
         sim.close()
+        return arrays
+
+
+def load_checkpoint(out_dir):
+    """(scene, checkpoint arrays) of the run in `out_dir`: the scene of out_dir/scene.json, which
+    must be the one the checkpoint was computed with and give the same parameter block."""
+    from sphcore.scene import Scene
+
+    out_dir = Path(out_dir)
+    path, scene_file = out_dir / CHECKPOINT, out_dir / "scene.json"
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such file; `sphcore run SCENE --out {out_dir}` writes one at the start "
+                              "and every time.checkpoint_every steps")
+    needed = {"step", "scene", "params", "backend", "device"} | {f"buffer_{name}" for name in CARRIED}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files}
+        missing = sorted(needed - set(arrays))
+        if missing:
+            raise ValueError(f"no {missing[0]}: not a checkpoint of this version of sphcore")
+        stored_scene = json.loads(str(arrays["scene"]))
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # JSONDecodeError is a ValueError
+        raise CheckpointError(f"{path}: not a readable checkpoint ({e})") from None
+    try:
+        scene = Scene.from_dict(json.loads(scene_file.read_text(encoding="utf-8")), str(scene_file))
+    except (OSError, ValueError) as e:  # SceneError, JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise CheckpointError(f"{scene_file}: {getattr(e, 'strerror', None) or e}; the run's scene is needed "
+                              "to resume") from None
+    difference = _first_difference(scene.config, stored_scene)
+    if difference:
+        raise CheckpointError(f"{scene_file} is not the scene {path} was computed with ({difference}); "
+                              "put the run's scene back, or start a new run in another folder")
+    n = len(scene.initial_positions())
+    if len(arrays["buffer_particle_id"]) != n:
+        raise CheckpointError(f"{path} holds {len(arrays['buffer_particle_id'])} particles, the scene {n}")
+    params = scene.params(n)
+    if arrays["params"].tobytes() != params.tobytes():
+        stored = np.frombuffer(arrays["params"].tobytes(), params.dtype) if arrays["params"].nbytes == params.nbytes else None
+        field = "layout" if stored is None else next((f for f in params.dtype.names
+                                                      if stored[0][f].tobytes() != params[0][f].tobytes()), "padding")
+        raise CheckpointError(f"{path}: the parameter block this version of sphcore computes from the scene differs "
+                              f"from the checkpoint's (field {field}): written by another version; "
+                              "start a new run")
+    return scene, arrays
+
+
+def _first_difference(a, b, where=""):
+    """'key: x here, y there' for the first dotted key whose values differ, else ''."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for name in sorted(set(a) | set(b)):
+            found = _first_difference(a.get(name), b.get(name), f"{where}.{name}" if where else name)
+            if found:
+                return found
+        return ""
+    return "" if a == b else f"{where} = {json.dumps(a)} in scene.json, {json.dumps(b)} in the checkpoint"
+
+
+def note_resume(checkpoint, sim, out_dir):
+    """Say so on stderr where a resumed run continues on another backend or device than the one
+    that wrote its checkpoint: it continues from the same state, but not to the same bits."""
+    then = (str(checkpoint["backend"]), str(checkpoint["device"]))
+    now = (sim.backend.name, sim.device_name)
+    if then != now:
+        print(f"sphcore: note: {out_dir}/{CHECKPOINT} was written by {then[0]} on {then[1]}; continuing on "
+              f"{now[0]} on {now[1]}: the final state will not be bitwise that of an uninterrupted run",
+              file=sys.stderr)
+
+
+def resume(out_dir, backend=None, steps=None, progress=True, **backend_options):
+    """Continue the run in `out_dir` from its checkpoint until it has `steps` steps in all (default:
+    the scene's time.steps), on `backend` (default: the one that wrote the checkpoint). The
+    snapshot series continues; with the same backend and device the final state is bitwise that
+    of a run never stopped."""
+    scene, checkpoint = load_checkpoint(out_dir)
+    return run(scene, backend or str(checkpoint["backend"]), steps, out_dir, progress, checkpoint=checkpoint,
+               **backend_options)

@@ -354,7 +354,7 @@ class Context:
         if usage & vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT and nbytes > limit:
             raise VulkanError(f"out of device memory: buffer '{name}' needs {nbytes / 2**20:.1f} MiB, more than "
                               f"this device's largest storage buffer ({limit / 2**20:.1f} MiB on {self.device_name}); "
-                              "use fewer particles or --backend numba")
+                              "use fewer particles or a coarser grid, or --backend numba")
         buffer = vk.vkCreateBuffer(self.device, vk.VkBufferCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO, size=nbytes, usage=usage,
             sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE), None)
@@ -376,19 +376,27 @@ class Context:
             vk.vkDestroyBuffer(self.device, buffer, None)
             raise VulkanError(f"out of device memory: buffer '{name}' needs {req.size / 2**20:.1f} MiB "
                               f"({self.device_name}, heap of {heap / 2**20:.0f} MiB); "
-                              "use fewer particles or --backend numba") from None
+                              "use fewer particles or a coarser grid, or --backend numba") from None
         vk.vkBindBufferMemory(self.device, buffer, memory, 0)
         return buffer, memory, flags & host == host
 
+    def _map(self, memory, nbytes):
+        vk = self.vk
+        try:
+            return vk.vkMapMemory(self.device, memory, 0, nbytes, 0)
+        except (vk.VkErrorMemoryMapFailed, vk.VkErrorDeviceLost, vk.VkErrorOutOfHostMemory) as e:
+            raise VulkanError(f"could not map {nbytes / 2**20:.1f} MiB of memory on {self.device_name} "
+                              f"({type(e).__name__}): use fewer particles or --backend numba") from None
+
     def _write_mapped(self, memory, data):
         vk = self.vk
-        mapped = vk.vkMapMemory(self.device, memory, 0, data.nbytes, 0)
+        mapped = self._map(memory, data.nbytes)
         vk.ffi.memmove(mapped, vk.ffi.from_buffer(data), data.nbytes)
         vk.vkUnmapMemory(self.device, memory)
 
     def _read_mapped(self, memory, nbytes):
         vk = self.vk
-        mapped = vk.vkMapMemory(self.device, memory, 0, nbytes, 0)
+        mapped = self._map(memory, nbytes)
         out = np.frombuffer(mapped, np.uint8, nbytes).copy()  # copy before the view dies with unmap
         vk.vkUnmapMemory(self.device, memory)
         return out
@@ -422,18 +430,27 @@ class Context:
                 pCommandBuffers=[recording.command_buffer])], self.fence)
             vk.vkWaitForFences(self.device, 1, [self.fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
         except vk.VkErrorDeviceLost:
-            raise VulkanError(f"the Vulkan device was lost ({self.device_name}); the last checkpoint is "
-                              "intact: retry, use fewer particles, or run with --backend numba") from None
+            raise VulkanError(f"the Vulkan device was lost ({self.device_name}): its driver reset it (a fault, "
+                              "a time-out, or another program); retry, or run with --backend numba") from None
         except (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory):
             raise VulkanError(f"out of device memory while running on {self.device_name}: "
                               "use fewer particles or --backend numba") from None
+        except vk.VkTimeout:
+            raise VulkanError(f"{self.device_name} did not finish one submission in {FENCE_TIMEOUT_NS // 10**9} s: "
+                              "use fewer particles or --backend numba") from None
+        except (vk.VkError, vk.VkException) as e:
+            raise VulkanError(f"running on {self.device_name} failed ({type(e).__name__}): retry, or run with "
+                              "--backend numba") from None
         vk.vkResetFences(self.device, 1, [self.fence])
 
     def close(self):
         vk = self.vk
         if getattr(self, "device", None) is None:
             return
-        vk.vkDeviceWaitIdle(self.device)
+        try:
+            vk.vkDeviceWaitIdle(self.device)
+        except vk.VkErrorDeviceLost:
+            pass  # nothing runs on a lost device any more; its objects are destroyed all the same
         vk.vkDestroyFence(self.device, self.fence, None)
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
