@@ -1,0 +1,47 @@
+"""Subcommands `sphcore validate ...`, `sphcore sweep` and `sphcore report` (added to sphcore.cli)."""
+from pathlib import Path
+
+
+def cmd_dam_break(args):
+    from sphcore.validate import dam_break
+
+    settings = {k: v for k, v in vars(args).items() if k in dam_break.SETTINGS and v is not None}
+    out = Path(args.out)
+    rows, summary = dam_break.run_dam_break(settings, out)
+    png = dam_break.plot(rows, summary, out / f"dam_break_{summary['settings']['dimension']}d.png")
+    print(f"{summary['particles']} particles, {summary['steps']} steps of {summary['dt']:.3g} s in {summary['wall_s']:.1f} s; "
+          f"RMS of Z against Martin & Moyce Table 2: {summary['rms_Z_table2']:.3f} ({summary['points_table2']} points, "
+          f"simulated T + {summary['gate_shift_T']:g}; unshifted {summary['rms_Z_table2_unshifted']:.3f}) -> {png}")
+
+
+def positive(kind):
+    def parse(text):
+        value = kind(text)
+        if not value > 0:
+            raise ValueError
+        return value
+    parse.__name__ = f"positive {kind.__name__}"
+    return parse
+
+
+def add_commands(sub):
+    """Add `validate` (with its cases) to the subparsers `sub` of `sphcore`."""
+    from sphcore.validate.dam_break import SETTINGS
+
+    p = sub.add_parser("validate", help="run a validation case against published experiments")
+    cases = p.add_subparsers(dest="case", required=True)
+    d = cases.add_parser("dam-break", help="Martin & Moyce (1952) column collapse: front and column height")
+    d.add_argument("--out", required=True, help="output folder (CSV, JSON, PNG)")
+    d.add_argument("--backend", choices=["numba", "vulkan"], help=f"(default {SETTINGS['backend']})")
+    d.add_argument("--device", help="Vulkan device: index or part of its name")
+    d.add_argument("--dimension", type=int, choices=[2, 3], help="(default 2; 3: a channel a few particles deep)")
+    d.add_argument("--resolution", type=positive(int), help=f"particles across the column width a (default {SETTINGS['resolution']})")
+    d.add_argument("--precision", choices=["float32", "float64"])
+    d.add_argument("--equation-of-state", choices=["linear", "tait"])
+    d.add_argument("--stiffness", type=positive(float), help=f"k = c^2 in m^2/s^2 (default {SETTINGS['stiffness']:g})")
+    d.add_argument("--alpha", type=float, help=f"viscosity as alpha of mu = alpha rho_0 c h / 8 (default {SETTINGS['alpha']:g})")
+    d.add_argument("--viscosity", type=float, help="Pa s (replaces --alpha)")
+    d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
+    d.add_argument("--neighbour-search", choices=["grid", "all_pairs"])
+    d.add_argument("--t-end", type=positive(float), help=f"simulated seconds (default {SETTINGS['t_end']:g})")
+    d.set_defaults(func=cmd_dam_break)

@@ -1,0 +1,245 @@
+"""The collapse of a water column after Martin & Moyce (1952): width a, height 2a (n^2 = 2),
+released at t = 0 against the left wall of a closed tank, front and residual column measured.
+
+Dimensionless as in the paper: T = t sqrt(2 g / a), Z = front_x / a, tau = t sqrt(g / a),
+H = column_height / (2 a).
+
+Front: the largest x reached by a particle with at least `k` neighbours within h, plus dx / 2
+(each particle stands for a cell dx wide, so the front is a at t = 0); k is a third of a bulk
+particle's neighbour count, so spray and lone droplets ahead of the surge are not the front,
+while a film two particles thick is. Column height: the largest y reached, the same way, by a
+particle within h of the left wall.
+"""
+import csv
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sphcore.scene import Scene
+from sphcore.validate import DATA_DIR
+
+G = 9.81
+TANK_LENGTH = 8.0  # in units of a
+TANK_HEIGHT = 2.4  # in units of a
+SAMPLE_DT = 0.05  # output interval in T
+# The time origin of the experiment: its column was held by a paper membrane burst at t = 0,
+# which takes a finite time to clear the column; simulations released instantly lead the
+# measurements by about T = 0.175 (Lethe's dam-break example adds this shift to simulated
+# time). The error is reported with and without it; the gate uses it.
+GATE_SHIFT = 0.175
+
+# name -> (file in validation/data, label): the measured fronts, Z(T), all at n^2 = 2
+FRONT_SERIES = {
+    "table2": ("martin_moyce_1952_table2_front_n2eq2_a2.25in_ocellaris.csv", "Martin & Moyce 1952, Table 2 (a = 2.25 in)"),
+    "fig3_a2.25": ("martin_moyce_1952_fig3_n2eq2_a2.25in_pysph.csv", "Martin & Moyce 1952, Fig. 3 (a = 2.25 in)"),
+    "fig3_a1.125": ("martin_moyce_1952_fig3_n2eq2_a1.125in_pysph.csv", "Martin & Moyce 1952, Fig. 3 (a = 1.125 in)"),
+    "koshizuka": ("koshizuka_oka_1996_front_exp_pysph.csv", "Koshizuka & Oka 1996, experiment"),
+}
+
+SETTINGS = {  # the validation case's defaults: what `sphcore validate dam-break` runs
+    "dimension": 2,
+    "resolution": 40,  # particles across a
+    "a": 0.25,  # m
+    "t_end": 0.5,  # s: T = 4.4, Z about 5
+    "backend": "numba",
+    "precision": "float32",
+    "equation_of_state": "linear",
+    "stiffness": 900.0,  # m^2/s^2: c = 30 m/s, 7x the front speed 2 sqrt(2 g a)
+    "alpha": 0.0125,  # viscosity mu = alpha rho_0 c h / 8: Monaghan's artificial viscosity alpha (2D)
+    "viscosity": None,  # Pa s: given, it replaces alpha's
+    "smoothing_ratio": 2.0,
+    "dt_fraction": 1.0,  # of the stability bound (dt = "auto")
+    "neighbour_search": "grid",
+    "depth": 4,  # 3D: particles across the channel (free slip walls either side)
+}
+
+
+def read_series(name):
+    """(T, Z) arrays of a measured series and its header line."""
+    path = DATA_DIR / FRONT_SERIES[name][0]
+    header = path.open(encoding="utf-8").readline().lstrip("# ").strip()
+    data = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    return data[:, 0], data[:, 1], header
+
+
+def dam_break_scene(settings):
+    """The Scene of `settings` (SETTINGS overridden)."""
+    s = {**SETTINGS, **settings}
+    a, dim = s["a"], s["dimension"]
+    dx = a / s["resolution"]
+    viscosity = s["viscosity"]
+    if viscosity is None:
+        viscosity = s["alpha"] * 1000.0 * math.sqrt(s["stiffness"]) * s["smoothing_ratio"] * dx / 8
+    lo, hi = [0.0, 0.0], [TANK_LENGTH * a, TANK_HEIGHT * a]
+    block = {"min": [0.0, 0.0], "max": [a, 2 * a]}
+    gravity = [0.0, -G]
+    if dim == 3:
+        depth = s["depth"] * dx
+        lo, hi = lo + [0.0], hi + [max(depth, 2.2 * s["smoothing_ratio"] * dx)]
+        block = {"min": [0.0, 0.0, 0.0], "max": [a, 2 * a, depth]}
+        gravity = gravity + [0.0]
+    return Scene.from_dict({
+        "name": f"dam_break_{dim}d",
+        "physics": {"dimension": dim, "equation_of_state": s["equation_of_state"],
+                    "neighbour_search": s["neighbour_search"], "precision": s["precision"]},
+        "domain": {"box_min": lo, "box_max": hi},
+        "fluid": {"blocks": [block], "spacing": dx, "smoothing_ratio": s["smoothing_ratio"],
+                  "stiffness": s["stiffness"], "viscosity": viscosity},
+        "forces": {"gravity": gravity},
+        "time": {"dt": "auto", "dt_fraction": s["dt_fraction"], "steps": 1},
+    }, source="dam break (Martin & Moyce 1952)")
+
+
+def neighbour_counts(x, candidates, h):
+    """Neighbours within h (itself excluded) of each particle in `candidates`."""
+    counts = np.empty(len(candidates), np.int64)
+    h2 = h * h
+    for start in range(0, len(candidates), 64):
+        c = candidates[start:start + 64]
+        d2 = ((x[None, :, :] - x[c][:, None, :]) ** 2).sum(axis=2)
+        counts[start:start + 64] = (d2 < h2).sum(axis=1) - 1
+    return counts
+
+
+def min_neighbours(scene):
+    """A third of the neighbours of a particle inside the initial lattice (itself excluded)."""
+    reach = int(math.ceil(scene["fluid.smoothing_ratio"]))
+    axis = np.arange(-reach, reach + 1)
+    r2 = sum(np.meshgrid(*[axis ** 2] * scene.dim, indexing="ij"))
+    bulk = int((r2 < scene["fluid.smoothing_ratio"] ** 2).sum()) - 1
+    return max(2, math.ceil(bulk / 3))
+
+
+def furthest(x, values, h, k):
+    """The largest of `values` over particles with at least k neighbours (NaN if none)."""
+    order = np.argsort(values)[::-1]
+    for start in range(0, len(order), 256):
+        batch = order[start:start + 256]
+        ok = neighbour_counts(x, batch, h) >= k
+        if ok.any():
+            return float(values[batch[np.argmax(ok)]])
+    return math.nan
+
+
+def measure(scene, x):
+    """(front_x, column_height) of positions x (N, dim), as defined in the module docstring."""
+    h, dx, k = scene.h, scene["fluid.spacing"], min_neighbours(scene)
+    front = furthest(x, x[:, 0], h, k)
+    near_wall = np.flatnonzero(x[:, 0] < h)
+    height = furthest(x[near_wall], x[near_wall, 1], h, k) if len(near_wall) else math.nan
+    return front + dx / 2, height + dx / 2
+
+
+def run_dam_break(settings=None, out_dir=None, progress=True):
+    """Run the case; return (rows, summary). rows: one dict per sample (t, front_x,
+    column_height, T, Z, tau, H). Writes dam_break_<dim>d.csv and summary JSON to out_dir if given."""
+    from tqdm import tqdm
+
+    from sphcore.simulation import Simulation
+
+    s = {**SETTINGS, **(settings or {})}
+    scene = dam_break_scene(s)
+    a, dt = s["a"], scene.dt
+    every = max(1, round(SAMPLE_DT / math.sqrt(2 * G / a) / dt))
+    steps = math.ceil(s["t_end"] / dt)
+    options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
+    sim = Simulation(scene, s["backend"], **options)
+    rows, wall = [], 0.0
+    try:
+        with tqdm(total=steps, unit="step", disable=not progress, desc=f"dam break {s['dimension']}D [{s['backend']}]") as bar:
+            while True:
+                front, height = measure(scene, sim.read()["particle_x"])
+                t = sim.time
+                rows.append({"t": t, "front_x": front, "column_height": height, "T": t * math.sqrt(2 * G / a),
+                             "Z": front / a, "tau": t * math.sqrt(G / a), "H": height / (2 * a)})
+                if sim.step_count >= steps:
+                    break
+                k = min(every, steps - sim.step_count)
+                start = time.perf_counter()
+                sim.advance(k)  # both backends return when the steps are done
+                wall += time.perf_counter() - start
+                bar.update(k)
+    finally:
+        sim.close()
+    summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": steps, "wall_s": wall,
+               "min_neighbours": min_neighbours(scene), **errors(rows, s)}
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        write_csv(out / f"dam_break_{s['dimension']}d.csv", rows)
+        (out / f"dam_break_{s['dimension']}d.json").write_text(json.dumps(summary, indent=1))
+    return rows, summary
+
+
+def rms_z(rows, series="table2", shift=0.0):
+    """RMS of simulated minus measured Z at the measured T values (simulated T + shift), over
+    the measurements the run covers (T within the run, Z short of the far wall); and their count."""
+    T = np.array([r["T"] for r in rows]) + shift
+    Z = np.array([r["Z"] for r in rows])
+    T_exp, Z_exp, _ = read_series(series)
+    use = (T_exp >= T[0]) & (T_exp <= T[-1]) & (Z_exp < TANK_LENGTH - 1)
+    if not use.any():
+        return math.nan, 0
+    diff = np.interp(T_exp[use], T, Z) - Z_exp[use]
+    return float(np.sqrt(np.mean(diff ** 2))), int(use.sum())
+
+
+def best_shift(rows, series="table2"):
+    """The time shift in T within [0, 0.5] that minimises the RMS against `series`."""
+    shifts = np.linspace(0.0, 0.5, 51)
+    return float(shifts[np.argmin([rms_z(rows, series, d)[0] for d in shifts])])
+
+
+def errors(rows, settings):
+    out = {"gate_shift_T": GATE_SHIFT}
+    for name in FRONT_SERIES:
+        out[f"rms_Z_{name}"], out[f"points_{name}"] = rms_z(rows, name, GATE_SHIFT)
+        out[f"rms_Z_{name}_unshifted"] = rms_z(rows, name, 0.0)[0]
+    out["best_shift_T_table2"] = best_shift(rows)
+    return out
+
+
+def write_csv(path, rows):
+    from sphcore.output import atomic_write_bytes
+    import io
+
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    for r in rows:
+        writer.writerow({k: f"{v:.6g}" for k, v in r.items()})
+    atomic_write_bytes(path, buf.getvalue().encode())
+
+
+def plot(rows, summary, path):
+    """Z(T) over the measured fronts and H(tau) over the free-fall bound, as a PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    T = np.array([r["T"] for r in rows])
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2), dpi=110)
+    for name, marker in zip(FRONT_SERIES, "os^v"):
+        T_exp, Z_exp, _ = read_series(name)
+        ax.plot(T_exp, Z_exp, marker, ms=5, mfc="none", label=FRONT_SERIES[name][1])
+    shift = summary["gate_shift_T"]
+    ax.plot(T + shift, [r["Z"] for r in rows], "k-", label=f"sphcore, T + {shift:g} (gate release)")
+    ax.plot(T, [r["Z"] for r in rows], "k:", lw=1, label="sphcore, unshifted")
+    ax.set(xlabel="T = t sqrt(2g/a)", ylabel="Z = front / a", xlim=(0, T[-1] + shift), ylim=(1, TANK_LENGTH),
+           title=f"front: RMS {summary['rms_Z_table2']:.3f} against Table 2")
+    ax.legend(fontsize=7)
+    tau = np.array([r["tau"] for r in rows])
+    bx.plot(tau, [r["H"] for r in rows], "k-", label="sphcore: column height at the left wall")
+    bx.plot(tau, np.clip(1 - tau ** 2 / 4, 0, 1), "r--", lw=1, label="free fall of the top, 1 - tau^2/4 (lower bound)")
+    bx.set(xlabel="tau = t sqrt(g/a)", ylabel="H = height / 2a", ylim=(0, 1.1), title="residual column")
+    bx.legend(fontsize=7)
+    s = summary["settings"]
+    fig.suptitle(f"{s['dimension']}D dam break, {summary['particles']} particles ({s['resolution']} across a), "
+                 f"{s['equation_of_state']} EOS, {s['precision']}, {s['backend']}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
