@@ -13,7 +13,8 @@ its last submit, so the timer brackets finished GPU work.
     python benchmarks/steps_per_second.py --backend vulkan --counts 20000 \
         --local-size 64,128,256 --steps-per-submit 64,256 --out sweep.json
 
---local-size and --steps-per-submit take comma lists; every combination is timed.
+--local-size, --steps-per-submit and --precision (float32,float64: physics.precision, the
+float64 build of the shaders and mirrors) take comma lists; every combination is timed.
 """
 import argparse
 import itertools
@@ -39,6 +40,14 @@ COUNTS_3D = [4096, 8192, 16384, 32768, 65536, 131072, 262144]
 
 def ints(text):
     return [int(v) for v in text.split(",") if v]
+
+
+def precisions(text):
+    values = [v for v in text.split(",") if v]
+    bad = [v for v in values if v not in ("float32", "float64")]
+    if bad or not values:
+        raise argparse.ArgumentTypeError(f"choose float32, float64 or both, got {text!r}")
+    return values
 
 
 DROP_M = 10.0  # free fall before the floor: 1.43 s = 14000 steps of dt = 1e-4 s
@@ -70,13 +79,14 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01):
     return scene, x[:n]
 
 
-def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, min_seconds, device=None):
+def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, min_seconds, device=None,
+              precision="float32"):
     from sphcore.backends import empty_state, make_backend, plan
     scene, x = make_case(n, dim, search)
     params = scene.params(n)
-    state = empty_state(params)
+    state = empty_state(params, precision)
     state["particle_x"][:, :dim] = x
-    options = {"local_size": local_size}
+    options = {"local_size": local_size, "precision": precision}
     if backend == "vulkan":
         options.update(steps_per_submit=steps_per_submit, device=device)
         chunk = max(steps_per_submit, min_steps // steps_per_submit * steps_per_submit)
@@ -103,7 +113,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
     finite = bool(np.isfinite(xs).all() and np.isfinite(out["particle_v"]).all())
     lo, hi = np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])
     wall_gap = float(min((xs - lo).min(), (hi - xs).min()))
-    return device_name, {"n": n, "dim": dim, "search": search, "local_size": local_size,
+    return device_name, {"n": n, "dim": dim, "search": search, "precision": precision, "local_size": local_size,
                          "steps_per_submit": steps_per_submit if backend == "vulkan" else None,
                          "steps": steps, "seconds": seconds, "steps_per_second": steps / seconds,
                          "ms_per_step": 1e3 * seconds / steps, "particle_steps_per_second": n * steps / seconds,
@@ -159,6 +169,7 @@ def main():
     ap.add_argument("--min-seconds", type=float, default=1.0)
     ap.add_argument("--local-size", type=ints, default=[128])
     ap.add_argument("--steps-per-submit", type=ints, default=[64])
+    ap.add_argument("--precision", type=precisions, default=["float32"], help="float32, float64 or both (comma list)")
     ap.add_argument("--device", default=None, help="Vulkan device index or name substring")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
@@ -183,15 +194,15 @@ def main():
               "seed1_note": "seed 1 reported frames/s of its Vulkan build on a GTX 1070 (2D, all pairs)",
               "seed2_ms_per_step_cpu_gpu": {str(k): v for k, v in SEED2_MS.items()},
               "seed2_note": "seed 2 table 6.1: ms per 3D step, one Core 2 Q6600 thread / GTX 560 (grid)"}
-    print(f"{'N':>8} {'local':>5} {'spp':>4} {'steps':>6} {'seconds':>8} {'steps/s':>10} {'ms/step':>9}"
+    print(f"{'N':>8} {'prec':>7} {'local':>5} {'spp':>4} {'steps':>6} {'seconds':>8} {'steps/s':>10} {'ms/step':>9}"
           f" {'particle-steps/s':>16} {'seed':>12}  device", flush=True)
-    for n, ls, spp in itertools.product(args.counts, args.local_size, spps):
+    for n, precision, ls, spp in itertools.product(args.counts, args.precision, args.local_size, spps):
         device, row = time_case(args.backend, n, args.dim, args.search, ls, spp, min_steps, args.min_seconds,
-                                args.device)
+                                args.device, precision)
         record["device"] = device
         record["results"].append(row)
         seed = SEED1_GTX1070_FPS.get(n) if args.dim == 2 else SEED2_MS.get(n)
-        print(f"{n:>8} {ls:>5} {spp or '-':>4} {row['steps']:>6} {row['seconds']:>8.3f} "
+        print(f"{n:>8} {precision:>7} {ls:>5} {spp or '-':>4} {row['steps']:>6} {row['seconds']:>8.3f} "
               f"{row['steps_per_second']:>10.2f} {row['ms_per_step']:>9.3f} {row['particle_steps_per_second']:>16.4g}"
               f" {str(seed or ''):>12}  {device}" + ("" if row["finite"] else "  NON-FINITE STATE"), flush=True)
         record["host"]["loadavg_now"] = os.getloadavg()

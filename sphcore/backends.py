@@ -7,6 +7,10 @@ specialization constants (`Scene.spec`).
 With the grid, every step starts by sorting the particles by cell (a counting sort through a
 HistoPyramid, seed 2), so the particle buffers are permuted every step; `particle_id` travels
 with them and `in_particle_order` undoes the permutation for output.
+
+`precision` (scene key physics.precision, "float32" or "float64") is the type of the real-valued
+buffers and of the arithmetic on them: Vulkan builds the shaders with SPHCORE_FLOAT64
+(shaders/sph/real.glsl), numba builds the mirrors with `real = np.float64`.
 """
 from collections import namedtuple
 
@@ -26,21 +30,24 @@ from sphcore.sph.scatter_particles import scatter_particles
 from sphcore.sph.sort_cells import sort_cells
 from sphcore.workgroups import group_count
 
+REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
+PRECISIONS = ("float32", "float64")
+
 # binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | count)
 BUFFERS = {
-    "particle_x": (np.float32, 4, "particles"),
-    "particle_v": (np.float32, 4, "particles"),
-    "particle_a": (np.float32, 4, "particles"),
-    "particle_rho": (np.float32, 1, "particles"),
-    "particle_p": (np.float32, 1, "particles"),
+    "particle_x": (REAL, 4, "particles"),
+    "particle_v": (REAL, 4, "particles"),
+    "particle_a": (REAL, 4, "particles"),
+    "particle_rho": (REAL, 1, "particles"),
+    "particle_p": (REAL, 1, "particles"),
     "particle_id": (np.uint32, 1, "particles"),
     "particle_cell": (np.uint32, 1, "particles"),
     "particle_slot": (np.uint32, 1, "particles"),
     "cell_pyramid": (np.uint32, 1, "pyramid"),
     "cell_start": (np.uint32, 1, "cells"),
     "sorted_index": (np.uint32, 1, "particles"),
-    "scratch_x": (np.float32, 4, "particles"),
-    "scratch_v": (np.float32, 4, "particles"),
+    "scratch_x": (REAL, 4, "particles"),
+    "scratch_v": (REAL, 4, "particles"),
     "scratch_id": (np.uint32, 1, "particles"),
     "grid_status": (np.uint32, 1, 4),
     "particle_neighbours": (np.uint32, 2, "particles"),
@@ -91,6 +98,14 @@ def plan(scene):
     return stages + [Stage("compute_density"), Stage("compute_forces"), Stage("integrate")]
 
 
+def buffer_dtype(name, precision="float32"):
+    """The numpy dtype of buffer `name` at `precision` ("float32" or "float64")."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown precision {precision!r}: choose one of {', '.join(PRECISIONS)}")
+    dtype = BUFFERS[name][0]
+    return np.dtype(precision if dtype == REAL else dtype)
+
+
 def buffer_length(length, params):
     if length == "particles":
         return int(params[0]["n"])
@@ -101,12 +116,12 @@ def buffer_length(length, params):
     return length
 
 
-def empty_state(params):
-    """Zeroed buffers for `params` (ids 0..n-1, grid status cleared)."""
+def empty_state(params, precision="float32"):
+    """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`."""
     state = {}
-    for name, (dtype, c, length) in BUFFERS.items():
+    for name, (_, c, length) in BUFFERS.items():
         k = buffer_length(length, params)
-        state[name] = np.zeros((k, c) if c > 1 else k, dtype)
+        state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
     return state
@@ -146,19 +161,21 @@ def stage_params(params, stage):
 
 
 class NumbaBackend:
-    """The shaders' numba mirrors on the CPU: work groups in parallel, invocations in order."""
+    """The shaders' numba mirrors on the CPU: work groups in parallel, invocations in order.
+    `state` is converted to `precision` (a copy: the caller's arrays are never written)."""
 
     name = "numba"
 
-    def __init__(self, params, state, stages, spec, local_size=128):
+    def __init__(self, params, state, stages, spec, local_size=128, precision="float32"):
         self.params, self.stages, self.spec, self.local_size = params, stages, spec, local_size
-        self.state = {k: np.array(v, copy=True) for k, v in state.items()}
-        self._launch = [(STAGES[s.name][0](spec), group_count(dispatch_size(s, params), local_size),
+        self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
+        self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
+        self._launch = [(STAGES[s.name][0](spec, self.real), group_count(dispatch_size(s, params), local_size),
                          stage_params(params, s), [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
 
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
-        launch = STAGES[stage.name][0](self.spec)
+        launch = STAGES[stage.name][0](self.spec, self.real)
         launch(group_count(dispatch_size(stage, self.params), self.local_size), self.local_size,
                stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
@@ -178,22 +195,26 @@ class NumbaBackend:
 
 
 class VulkanBackend:
-    """The shaders through Vulkan: device-local buffers, many steps per command buffer."""
+    """The shaders through Vulkan: device-local buffers, many steps per command buffer. With
+    precision "float64" the shaders are built with SPHCORE_FLOAT64 (the device must support
+    shaderFloat64, else VulkanError); `state` is converted to `precision`."""
 
     name = "vulkan"
 
     def __init__(self, params, state, stages, spec, local_size=128, device=None, validation=None,
-                 steps_per_submit=64):
+                 steps_per_submit=64, precision="float32"):
         from vk_runner import Context
-        self.ctx = Context(device=device, validation=validation)
-        self.params, self.stages, self.steps_per_submit = params, stages, steps_per_submit
+        self.dtypes = {name: buffer_dtype(name, precision) for name in BUFFERS}
+        self.defines = ("SPHCORE_FLOAT64",) if precision == "float64" else ()
+        self.ctx = Context(device=device, validation=validation, float64=precision == "float64")
+        self.params, self.stages, self.steps_per_submit, self.precision = params, stages, steps_per_submit, precision
         self.shapes = {}
         self.buffers = {}
-        for name, (dtype, c, length) in BUFFERS.items():
+        for name, (_, c, length) in BUFFERS.items():
             k = buffer_length(length, params)
             self.shapes[name] = (k, c) if c > 1 else (k,)
-            self.buffers[name] = self.ctx.buffer(k * c * np.dtype(dtype).itemsize, name)
-            self.buffers[name].write(state[name])
+            self.buffers[name] = self.ctx.buffer(k * c * self.dtypes[name].itemsize, name)
+            self.buffers[name].write(np.asarray(state[name], self.dtypes[name]))
         self.local_size, self.spec_values = local_size, spec.values()
         self.pipelines = {}
         for name in sorted({s.name for s in stages}):
@@ -204,7 +225,7 @@ class VulkanBackend:
         """The compute pipeline of shader `name`, built on first use with the scene's constants."""
         from vk_runner import compile_glsl
         if name not in self.pipelines:
-            spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp")
+            spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp", defines=self.defines)
             pipeline = self.ctx.pipeline(spirv, len(BUFFERS), self.params.dtype.itemsize, self.local_size,
                                          self.spec_values)
             pipeline.bind([self.buffers[b] for b in BUFFERS])
@@ -236,7 +257,7 @@ class VulkanBackend:
             self.ctx.submit(self._recording(rest, self.stages))
 
     def read(self):
-        return {name: self.buffers[name].read(dtype, self.shapes[name]) for name, (dtype, _, _) in BUFFERS.items()}
+        return {name: self.buffers[name].read(self.dtypes[name], self.shapes[name]) for name in BUFFERS}
 
     def clear_status(self):
         self.buffers["grid_status"].write(STATUS_CLEAR)
@@ -258,6 +279,8 @@ BACKENDS = {"numba": NumbaBackend, "vulkan": VulkanBackend}
 
 
 def make_backend(name, params, state, stages, spec, **options):
+    """Backend `name` over `state`; options: local_size, precision ("float32" | "float64"), and
+    for Vulkan device, validation, steps_per_submit."""
     if name not in BACKENDS:
         raise ValueError(f"unknown backend {name!r}: choose one of {', '.join(BACKENDS)}")
     return BACKENDS[name](params, state, stages, spec, **options)

@@ -53,10 +53,11 @@ class Simulation:
         x0 = scene.initial_positions()
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
-        state = empty_state(self.params)
+        state = empty_state(self.params, scene["physics.precision"])
         state["particle_x"][:, :self.dim] = x0
         self.stages = plan(scene)
-        self.backend = make_backend(backend, self.params, state, self.stages, scene.spec, **backend_options)
+        self.backend = make_backend(backend, self.params, state, self.stages, scene.spec,
+                                    precision=scene["physics.precision"], **backend_options)
         self.step_count = 0
         self.checked_step = 0
 

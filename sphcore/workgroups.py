@@ -12,8 +12,9 @@ that does is mirrored with one local loop per phase). A body with atomics is lau
 GPU may choose, and the fixed one. There is no FMA contraction, which a GPU compiler may apply.
 
 Shaders take their compile-time choices as specialization constants; a mirror module
-exposes a factory `stage(spec)` that builds its body with those values as closure
-constants (numba compiles them in, so a disabled term costs nothing), cached per `spec`.
+exposes a factory `stage(spec, real)` that builds its body with those values as closure
+constants (numba compiles them in, so a disabled term costs nothing), cached per `spec` and
+`real`, the float type of the shader build (np.float32, or np.float64: shaders/sph/real.glsl).
 """
 from numba import njit, prange
 

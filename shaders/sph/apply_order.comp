@@ -7,12 +7,13 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "real.glsl"
 
-layout(std430, binding = 0) writeonly buffer ParticleX { vec4 particle_x[]; };
-layout(std430, binding = 1) writeonly buffer ParticleV { vec4 particle_v[]; };
+layout(std430, binding = 0) writeonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) writeonly buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 5) writeonly buffer ParticleId { uint particle_id[]; };
-layout(std430, binding = 11) readonly buffer ScratchX { vec4 scratch_x[]; };
-layout(std430, binding = 12) readonly buffer ScratchV { vec4 scratch_v[]; };
+layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };
+layout(std430, binding = 12) readonly buffer ScratchV { real4 scratch_v[]; };
 layout(std430, binding = 13) readonly buffer ScratchId { uint scratch_id[]; };
 
 void main() {

@@ -6,15 +6,17 @@
 // P.box_min. With walls the grid covers the box; in an open domain cell coordinates wrap modulo
 // P.grid_dim (spatial hashing, seed 2): far-apart cells share a bucket, which is harmless because
 // every pair's distance is tested against h. The HistoPyramid over the per-cell counts has the
-// cells as its base (shaders/pyramid.glsl).
+// cells as its base (shaders/pyramid.glsl). Positions are `real` (real.glsl).
+
+#include "real.glsl"
 
 const int CELL_LIMIT = 1 << 24;  // |cell coordinate| beyond this: outside the hashed range
 
 // Cell coordinates of point x, clamped to +-CELL_LIMIT (z = 0 in 2D).
-ivec3 cell_of(vec3 x) {
-    vec3 f = floor((x - P.box_min) * P.inv_cell);
-    f = clamp(f, vec3(-float(CELL_LIMIT)), vec3(float(CELL_LIMIT)));
-    if (DIM == 2u) f.z = 0.0;
+ivec3 cell_of(real3 x) {
+    real3 f = floor((x - P.box_min) * P.inv_cell);
+    f = clamp(f, real3(-real(CELL_LIMIT)), real3(real(CELL_LIMIT)));
+    if (DIM == 2u) f.z = real(0.0);
     return ivec3(f);
 }
 
@@ -32,10 +34,10 @@ int cell_index(ivec3 c) {
 
 // Wall images: bit a of the result is set where the wall nearer to x on axis a (returned in
 // `wall`) is within h, so that x also sees every particle mirrored across it (walls only; z in 3D).
-uint near_walls(vec3 x, out vec3 wall) {
-    wall = vec3(x.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
-                x.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
-                x.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
+uint near_walls(real3 x, out real3 wall) {
+    wall = real3(x.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
+                 x.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
+                 x.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
     uint mirrored = 0u;
     if (WALLS && abs(x.x - wall.x) < P.h) mirrored |= 1u;
     if (WALLS && abs(x.y - wall.y) < P.h) mirrored |= 2u;
@@ -44,9 +46,9 @@ uint near_walls(vec3 x, out vec3 wall) {
 }
 
 // Point x mirrored across the walls of the axes whose bits are set in `image`.
-vec3 reflected(vec3 x, vec3 wall, uint image) {
-    return vec3((image & 1u) != 0u ? 2.0 * wall.x - x.x : x.x, (image & 2u) != 0u ? 2.0 * wall.y - x.y : x.y,
-                (image & 4u) != 0u ? 2.0 * wall.z - x.z : x.z);
+real3 reflected(real3 x, real3 wall, uint image) {
+    return real3((image & 1u) != 0u ? 2.0 * wall.x - x.x : x.x, (image & 2u) != 0u ? 2.0 * wall.y - x.y : x.y,
+                 (image & 4u) != 0u ? 2.0 * wall.z - x.z : x.z);
 }
 
 // Ranges of sorted particles that hold the 3^dim cells around a cell: with walls the three

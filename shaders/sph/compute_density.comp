@@ -6,11 +6,12 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "real.glsl"
 #include "cells.glsl"
 
-layout(std430, binding = 0) readonly buffer ParticleX { vec4 particle_x[]; };
-layout(std430, binding = 3) writeonly buffer ParticleRho { float particle_rho[]; };
-layout(std430, binding = 4) writeonly buffer ParticleP { float particle_p[]; };
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 3) writeonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 4) writeonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
@@ -30,22 +31,22 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] own position
-    vec3 xi = particle_x[i].xyz;
+    real3 xi = particle_x[i].xyz;
     // [3] wall images: within h of a wall, particle i also sees every particle mirrored across
     //     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
     //     that the wall nearer to xi on axis a is within h.
-    vec3 wall;
+    real3 wall;
     uint mirrored = near_walls(xi, wall);
     // [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
     //     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
     //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
     //     is within h of xi's own image xm, so the cells searched are those around xm.
-    float sum_w = 0.0;
+    real sum_w = real(0.0);
     uint found = 0u;
     uint fingerprint = 0u;
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
-        vec3 xm = reflected(xi, wall, image);
+        real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
         for (uint k = 0u; k < range_count(); ++k) {
@@ -59,10 +60,10 @@ void main() {
                 end = cell_start[last] + cell_pyramid[last];
             }
             for (uint j = start; j < end; ++j) {
-                vec3 r = xi - reflected(particle_x[j].xyz, wall, image);
-                float r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                real3 r = xi - reflected(particle_x[j].xyz, wall, image);
+                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 < P.h2) {
-                    float q = P.h2 - r2;
+                    real q = P.h2 - r2;
                     sum_w += q * q * q;
                     if (NEIGHBOUR_STATS) {
                         found += 1u;
@@ -73,19 +74,19 @@ void main() {
         }
     }
     // [6] rho_i = m sum_j W_poly6(r_ij, h)
-    float rho = P.density_coef * sum_w;
+    real rho = P.density_coef * sum_w;
     // [7] equation of state, clamped at 0 so that the free surface does not pull (tensile
     //     instability); attraction, where a scene wants it, comes from the cohesion term.
     //     linear: p = k (rho - rho_0) (seed 1); Tait: p = B ((rho / rho_0)^7 - 1) (Becker &
     //     Teschner 2007, seed 2), the power by multiplications
-    float p = P.stiffness * (rho - P.rest_density);
+    real p = P.stiffness * (rho - P.rest_density);
     if (TAIT) {
-        float ratio = rho / P.rest_density;
-        float ratio2 = ratio * ratio;
-        float ratio4 = ratio2 * ratio2;
-        p = P.stiffness * (ratio4 * ratio2 * ratio - 1.0);
+        real ratio = rho / P.rest_density;
+        real ratio2 = ratio * ratio;
+        real ratio4 = ratio2 * ratio2;
+        p = P.stiffness * (ratio4 * ratio2 * ratio - real(1.0));
     }
-    p = max(p, 0.0);
+    p = max(p, real(0.0));
     // [8] store
     particle_rho[i] = rho;
     particle_p[i] = p;

@@ -8,13 +8,14 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "real.glsl"
 #include "cells.glsl"
 
-layout(std430, binding = 0) readonly buffer ParticleX { vec4 particle_x[]; };
-layout(std430, binding = 1) readonly buffer ParticleV { vec4 particle_v[]; };
-layout(std430, binding = 2) writeonly buffer ParticleA { vec4 particle_a[]; };
-layout(std430, binding = 3) readonly buffer ParticleRho { float particle_rho[]; };
-layout(std430, binding = 4) readonly buffer ParticleP { float particle_p[]; };
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
+layout(std430, binding = 2) writeonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 4) readonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 
@@ -23,24 +24,24 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] own state
-    vec3 xi = particle_x[i].xyz;
-    vec3 vi = particle_v[i].xyz;
-    float rhoi = particle_rho[i];
-    float pi = particle_p[i];
-    float pi_rho2 = pi / (rhoi * rhoi);
+    real3 xi = particle_x[i].xyz;
+    real3 vi = particle_v[i].xyz;
+    real rhoi = particle_rho[i];
+    real pi = particle_p[i];
+    real pi_rho2 = pi / (rhoi * rhoi);
     // [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
-    vec3 wall;
+    real3 wall;
     uint mirrored = near_walls(xi, wall);
     // [4] sums over every other particle and every image within h
-    vec3 f_pressure = vec3(0.0);
-    vec3 f_viscosity = vec3(0.0);
-    vec3 f_cohesion = vec3(0.0);
+    real3 f_pressure = real3(0.0);
+    real3 f_viscosity = real3(0.0);
+    real3 f_cohesion = real3(0.0);
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
         bool fx = (image & 1u) != 0u;
         bool fy = (image & 2u) != 0u;
         bool fz = (image & 4u) != 0u;
-        vec3 xm = reflected(xi, wall, image);
+        real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
         for (uint k = 0u; k < range_count(); ++k) {
@@ -55,52 +56,52 @@ void main() {
             }
             for (uint j = start; j < end; ++j) {
                 if (j == i && image == 0u) continue;
-                vec3 r = xi - reflected(particle_x[j].xyz, wall, image);
-                float r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                real3 r = xi - reflected(particle_x[j].xyz, wall, image);
+                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 >= P.h2) continue;
-                float rhoj = particle_rho[j];
-                float pj = particle_p[j];
-                float rlen = sqrt(r2);
-                float hr = P.h - rlen;
+                real rhoj = particle_rho[j];
+                real pj = particle_p[j];
+                real rlen = sqrt(r2);
+                real hr = P.h - rlen;
                 // [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
                 //     NaN): an image coincides with i only on a wall, so push along that wall's
                 //     inward normal; two particles are pushed apart along x, antisymmetrically in
                 //     (i, j), so momentum is conserved
-                vec3 r_hat = vec3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = vec3(wall.x == P.box_min.x ? 1.0 : -1.0, 0.0, 0.0);
-                if (fy) r_hat = vec3(0.0, wall.y == P.box_min.y ? 1.0 : -1.0, 0.0);
-                if (fz) r_hat = vec3(0.0, 0.0, wall.z == P.box_min.z ? 1.0 : -1.0);
-                if (rlen > 0.0) r_hat = r / rlen;
+                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
+                if (fx) r_hat = real3(wall.x == P.box_min.x ? 1.0 : -1.0, 0.0, 0.0);
+                if (fy) r_hat = real3(0.0, wall.y == P.box_min.y ? 1.0 : -1.0, 0.0);
+                if (fz) r_hat = real3(0.0, 0.0, wall.z == P.box_min.z ? 1.0 : -1.0);
+                if (rlen > real(0.0)) r_hat = r / rlen;
                 // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
                 //     conserves momentum and energy with summation density (Monaghan 1992).
                 //     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
                 //     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
-                float fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr;
+                real fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr;
                 f_pressure += fp * r_hat;
                 // [8] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc; an image's velocity is
                 //     mirrored on its flipped axes
                 if (VISCOSITY) {
-                    vec3 vj = particle_v[j].xyz;
-                    float vk_x = fx ? -vj.x : vj.x;
-                    float vk_y = fy ? -vj.y : vj.y;
-                    float vk_z = fz ? -vj.z : vj.z;
-                    float fv = P.viscosity_coef / rhoj * hr;
-                    f_viscosity += fv * vec3(vk_x - vi.x, vk_y - vi.y, vk_z - vi.z);
+                    real3 vj = particle_v[j].xyz;
+                    real vk_x = fx ? -vj.x : vj.x;
+                    real vk_y = fy ? -vj.y : vj.y;
+                    real vk_z = fz ? -vj.z : vj.z;
+                    real fv = P.viscosity_coef / rhoj * hr;
+                    f_viscosity += fv * real3(vk_x - vi.x, vk_y - vi.y, vk_z - vi.z);
                 }
                 // [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
                 //     particles only: the walls are not wetted
                 if (SURFACE_TENSION && image == 0u) {
-                    float q = P.h2 - r2;
+                    real q = P.h2 - r2;
                     f_cohesion += q * q * q * r;
                 }
             }
         }
     }
     // [10] a_i = f_pressure + f_viscosity / rho_i + cohesion + g (f_pressure is per unit mass)
-    vec3 a = f_pressure;
+    real3 a = f_pressure;
     if (VISCOSITY) a += f_viscosity / rhoi;
     if (SURFACE_TENSION) a += P.cohesion_coef * f_cohesion;
     if (GRAVITY) a += P.gravity;
     // [11] store
-    particle_a[i] = vec4(a, 0.0);
+    particle_a[i] = real4(a, 0.0);
 }

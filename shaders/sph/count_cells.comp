@@ -6,9 +6,10 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "real.glsl"
 #include "cells.glsl"
 
-layout(std430, binding = 0) readonly buffer ParticleX { vec4 particle_x[]; };
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 6) writeonly buffer ParticleCell { uint particle_cell[]; };
 layout(std430, binding = 7) writeonly buffer ParticleSlot { uint particle_slot[]; };
@@ -22,11 +23,11 @@ void main() {
     // [2] cell coordinates; a particle outside the grid's range (past a wall, beyond the hashed
     //     range, or not finite) is counted in grid_status[0] and the lowest such id kept in
     //     grid_status[1]; it still gets a cell (0), so no particle is ever dropped
-    vec3 x = particle_x[i].xyz;
+    real3 x = particle_x[i].xyz;
     ivec3 c = cell_of(x);
-    vec3 f = floor((x - P.box_min) * P.inv_cell);
-    bool inside = WALLS ? all(greaterThanEqual(f, vec3(0.0))) && all(lessThanEqual(f, vec3(P.grid_dim)))
-                        : all(lessThan(abs(f), vec3(float(CELL_LIMIT))));
+    real3 f = floor((x - P.box_min) * P.inv_cell);
+    bool inside = WALLS ? all(greaterThanEqual(f, real3(0.0))) && all(lessThanEqual(f, real3(P.grid_dim)))
+                        : all(lessThan(abs(f), real3(real(CELL_LIMIT))));
     if (!inside) {
         atomicAdd(grid_status[0], 1u);
         atomicMin(grid_status[1], particle_id[i]);

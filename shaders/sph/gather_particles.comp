@@ -6,13 +6,14 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "real.glsl"
 
-layout(std430, binding = 0) readonly buffer ParticleX { vec4 particle_x[]; };
-layout(std430, binding = 1) readonly buffer ParticleV { vec4 particle_v[]; };
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 10) readonly buffer SortedIndex { uint sorted_index[]; };
-layout(std430, binding = 11) writeonly buffer ScratchX { vec4 scratch_x[]; };
-layout(std430, binding = 12) writeonly buffer ScratchV { vec4 scratch_v[]; };
+layout(std430, binding = 11) writeonly buffer ScratchX { real4 scratch_x[]; };
+layout(std430, binding = 12) writeonly buffer ScratchV { real4 scratch_v[]; };
 layout(std430, binding = 13) writeonly buffer ScratchId { uint scratch_id[]; };
 
 void main() {

@@ -5,18 +5,19 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "real.glsl"
 
-layout(std430, binding = 0) buffer ParticleX { vec4 particle_x[]; };
-layout(std430, binding = 1) buffer ParticleV { vec4 particle_v[]; };
-layout(std430, binding = 2) readonly buffer ParticleA { vec4 particle_a[]; };
+layout(std430, binding = 0) buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
+layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] symplectic Euler: v += dt a, then x += dt v
-    vec3 v = particle_v[i].xyz + P.dt * particle_a[i].xyz;
-    vec3 x = particle_x[i].xyz + P.dt * v;
+    real3 v = particle_v[i].xyz + P.dt * particle_a[i].xyz;
+    real3 x = particle_x[i].xyz + P.dt * v;
     // [3] walls: each axis is tested on its own (no else-if), so a particle past a corner is
     //     put back on every wall it crossed in the same step. Clamp the position; an outward
     //     normal speed is reversed and scaled by the restitution, an inward one is kept.
@@ -29,6 +30,6 @@ void main() {
         if (DIM == 3u && x.z > P.box_max.z) { x.z = P.box_max.z; v.z = min(v.z, -P.restitution * v.z); }
     }
     // [4] store
-    particle_x[i] = vec4(x, 0.0);
-    particle_v[i] = vec4(v, 0.0);
+    particle_x[i] = real4(x, 0.0);
+    particle_v[i] = real4(v, 0.0);
 }

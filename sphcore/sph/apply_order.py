@@ -6,13 +6,14 @@ Mirror of shaders/sph/apply_order.comp: same names, same statement order, same s
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def apply_order(spec):
+def apply_order(spec, real=np.float32):
     @njit
     def apply_order_main(k, params, particle_x, particle_v, particle_id, scratch_x, scratch_v, scratch_id):
         P = params[0]

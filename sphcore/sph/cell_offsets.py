@@ -6,6 +6,7 @@ The atomic on grid_status is made by invocation 0 alone, so a parallel launch is
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.pyramid import level_offset
@@ -13,7 +14,7 @@ from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def cell_offsets(spec):
+def cell_offsets(spec, real=np.float32):
     @njit
     def cell_offsets_main(c, params, cell_pyramid, cell_start, grid_status):
         P = params[0]

@@ -1,19 +1,19 @@
 """Neighbour-grid helpers shared by the grid and SPH mirrors.
 
 Mirror of shaders/sph/cells.glsl: same names, same statements. GLSL reads the parameter
-block as a global `P`; here it is the first argument. A GLSL ivec3 is three ints.
+block as a global `P`; here it is the first argument. A GLSL ivec3 is three ints; `real`
+is the shader's `real` (shaders/sph/real.glsl; default float32 for shaders/mc/sample_field).
 """
 from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
-f32 = np.float32
 CELL_LIMIT = 1 << 24  # |cell coordinate| beyond this: outside the hashed range
 
 
 @lru_cache(maxsize=None)
-def cells(spec):
+def cells(spec, real=np.float32):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
 
     @njit
@@ -22,11 +22,11 @@ def cells(spec):
         f_x = np.floor((x_x - P.box_min[0]) * P.inv_cell)
         f_y = np.floor((x_y - P.box_min[1]) * P.inv_cell)
         f_z = np.floor((x_z - P.box_min[2]) * P.inv_cell)
-        f_x = min(max(f_x, f32(-CELL_LIMIT)), f32(CELL_LIMIT))
-        f_y = min(max(f_y, f32(-CELL_LIMIT)), f32(CELL_LIMIT))
-        f_z = min(max(f_z, f32(-CELL_LIMIT)), f32(CELL_LIMIT))
+        f_x = min(max(f_x, real(-CELL_LIMIT)), real(CELL_LIMIT))
+        f_y = min(max(f_y, real(-CELL_LIMIT)), real(CELL_LIMIT))
+        f_z = min(max(f_z, real(-CELL_LIMIT)), real(CELL_LIMIT))
         if DIM == 2:
-            f_z = f32(0.0)
+            f_z = real(0.0)
         return int(f_x), int(f_y), int(f_z)
 
     @njit
@@ -62,9 +62,9 @@ def cells(spec):
     @njit
     def reflected(x_x, x_y, x_z, wall_x, wall_y, wall_z, image):
         """Point x mirrored across the walls of the axes whose bits are set in `image`."""
-        return (f32(2.0) * wall_x - x_x if (image & 1) != 0 else x_x,
-                f32(2.0) * wall_y - x_y if (image & 2) != 0 else x_y,
-                f32(2.0) * wall_z - x_z if (image & 4) != 0 else x_z)
+        return (real(2.0) * wall_x - x_x if (image & 1) != 0 else x_x,
+                real(2.0) * wall_y - x_y if (image & 2) != 0 else x_y,
+                real(2.0) * wall_z - x_z if (image & 4) != 0 else x_z)
 
     @njit
     def range_count():

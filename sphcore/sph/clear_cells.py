@@ -4,13 +4,14 @@ Mirror of shaders/sph/clear_cells.comp: same names, same statement order, same s
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def clear_cells(spec):
+def clear_cells(spec, real=np.float32):
     @njit
     def clear_cells_main(c, params, cell_pyramid):
         P = params[0]

@@ -12,7 +12,6 @@ from numba import njit
 from sphcore.sph.cells import cells
 from sphcore.workgroups import launcher
 
-f32 = np.float32
 
 
 @njit
@@ -26,9 +25,9 @@ def neighbour_hash(id, image):
 
 
 @lru_cache(maxsize=None)
-def compute_density(spec):
+def compute_density(spec, real=np.float32):
     DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
-    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec)
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
 
     @njit
     def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start,
@@ -49,7 +48,7 @@ def compute_density(spec):
         #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
         #     is within h of xi's own image xm, so the cells searched are those around xm.
-        sum_w = f32(0.0)
+        sum_w = real(0.0)
         found = 0
         fingerprint = 0
         for image in range(8):
@@ -91,8 +90,8 @@ def compute_density(spec):
             ratio = rho / P.rest_density
             ratio2 = ratio * ratio
             ratio4 = ratio2 * ratio2
-            p = P.stiffness * (ratio4 * ratio2 * ratio - f32(1.0))
-        p = max(p, f32(0.0))
+            p = P.stiffness * (ratio4 * ratio2 * ratio - real(1.0))
+        p = max(p, real(0.0))
         # [8] store
         particle_rho[i] = rho
         particle_p[i] = p

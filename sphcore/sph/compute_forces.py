@@ -14,14 +14,13 @@ from numba import njit
 from sphcore.sph.cells import cells
 from sphcore.workgroups import launcher
 
-f32 = np.float32
 
 
 @lru_cache(maxsize=None)
-def compute_forces(spec):
+def compute_forces(spec, real=np.float32):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
-    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec)
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
@@ -43,15 +42,15 @@ def compute_forces(spec):
         # [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         # [4] sums over every other particle and every image within h
-        f_pressure_x = f32(0.0)
-        f_pressure_y = f32(0.0)
-        f_pressure_z = f32(0.0)
-        f_viscosity_x = f32(0.0)
-        f_viscosity_y = f32(0.0)
-        f_viscosity_z = f32(0.0)
-        f_cohesion_x = f32(0.0)
-        f_cohesion_y = f32(0.0)
-        f_cohesion_z = f32(0.0)
+        f_pressure_x = real(0.0)
+        f_pressure_y = real(0.0)
+        f_pressure_z = real(0.0)
+        f_viscosity_x = real(0.0)
+        f_viscosity_y = real(0.0)
+        f_viscosity_z = real(0.0)
+        f_cohesion_x = real(0.0)
+        f_cohesion_y = real(0.0)
+        f_cohesion_z = real(0.0)
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
@@ -89,16 +88,16 @@ def compute_forces(spec):
                     #     NaN): an image coincides with i only on a wall, so push along that wall's
                     #     inward normal; two particles are pushed apart along x, antisymmetrically in
                     #     (i, j), so momentum is conserved
-                    r_hat_x = f32(-1.0) if i < j else f32(1.0)
-                    r_hat_y = f32(0.0)
-                    r_hat_z = f32(0.0)
+                    r_hat_x = real(-1.0) if i < j else real(1.0)
+                    r_hat_y = real(0.0)
+                    r_hat_z = real(0.0)
                     if fx:
-                        r_hat_x, r_hat_y, r_hat_z = f32(1.0) if wall_x == P.box_min[0] else f32(-1.0), f32(0.0), f32(0.0)
+                        r_hat_x, r_hat_y, r_hat_z = real(1.0) if wall_x == P.box_min[0] else real(-1.0), real(0.0), real(0.0)
                     if fy:
-                        r_hat_x, r_hat_y, r_hat_z = f32(0.0), f32(1.0) if wall_y == P.box_min[1] else f32(-1.0), f32(0.0)
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(1.0) if wall_y == P.box_min[1] else real(-1.0), real(0.0)
                     if fz:
-                        r_hat_x, r_hat_y, r_hat_z = f32(0.0), f32(0.0), f32(1.0) if wall_z == P.box_min[2] else f32(-1.0)
-                    if rlen > f32(0.0):
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), real(1.0) if wall_z == P.box_min[2] else real(-1.0)
+                    if rlen > real(0.0):
                         r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
                     # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
                     #     conserves momentum and energy with summation density (Monaghan 1992).
@@ -148,6 +147,6 @@ def compute_forces(spec):
         particle_a[i, 0] = a_x
         particle_a[i, 1] = a_y
         particle_a[i, 2] = a_z
-        particle_a[i, 3] = f32(0.0)
+        particle_a[i, 3] = real(0.0)
 
     return launcher(compute_forces_main)

@@ -12,13 +12,12 @@ from numba import njit
 from sphcore.sph.cells import CELL_LIMIT, cells
 from sphcore.workgroups import launcher
 
-f32 = np.float32
 
 
 @lru_cache(maxsize=None)
-def count_cells(spec):
+def count_cells(spec, real=np.float32):
     WALLS = spec.WALLS
-    cell_of, cell_index, _, _, _, _ = cells(spec)
+    cell_of, cell_index, _, _, _, _ = cells(spec, real)
 
     @njit
     def count_cells_main(i, params, particle_x, particle_id, particle_cell, particle_slot, cell_pyramid,
@@ -38,10 +37,10 @@ def count_cells(spec):
         f_y = np.floor((x_y - P.box_min[1]) * P.inv_cell)
         f_z = np.floor((x_z - P.box_min[2]) * P.inv_cell)
         if WALLS:
-            inside = (f_x >= f32(0.0) and f_y >= f32(0.0) and f_z >= f32(0.0)
-                      and f_x <= f32(P.grid_dim[0]) and f_y <= f32(P.grid_dim[1]) and f_z <= f32(P.grid_dim[2]))
+            inside = (f_x >= real(0.0) and f_y >= real(0.0) and f_z >= real(0.0)
+                      and f_x <= real(P.grid_dim[0]) and f_y <= real(P.grid_dim[1]) and f_z <= real(P.grid_dim[2]))
         else:
-            inside = abs(f_x) < f32(CELL_LIMIT) and abs(f_y) < f32(CELL_LIMIT) and abs(f_z) < f32(CELL_LIMIT)
+            inside = abs(f_x) < real(CELL_LIMIT) and abs(f_y) < real(CELL_LIMIT) and abs(f_z) < real(CELL_LIMIT)
         if not inside:
             grid_status[0] += 1
             grid_status[1] = min(grid_status[1], particle_id[i])

@@ -5,13 +5,14 @@ Mirror of shaders/sph/gather_particles.comp: same names, same statement order, s
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def gather_particles(spec):
+def gather_particles(spec, real=np.float32):
     @njit
     def gather_particles_main(k, params, particle_x, particle_v, particle_id, sorted_index,
                               scratch_x, scratch_v, scratch_id):

@@ -10,11 +10,10 @@ from numba import njit
 
 from sphcore.workgroups import launcher
 
-f32 = np.float32
 
 
 @lru_cache(maxsize=None)
-def integrate(spec):
+def integrate(spec, real=np.float32):
     DIM, WALLS = spec.DIM, spec.WALLS
 
     @njit
@@ -56,10 +55,10 @@ def integrate(spec):
         particle_x[i, 0] = x_x
         particle_x[i, 1] = x_y
         particle_x[i, 2] = x_z
-        particle_x[i, 3] = f32(0.0)
+        particle_x[i, 3] = real(0.0)
         particle_v[i, 0] = v_x
         particle_v[i, 1] = v_y
         particle_v[i, 2] = v_z
-        particle_v[i, 3] = f32(0.0)
+        particle_v[i, 3] = real(0.0)
 
     return launcher(integrate_main)

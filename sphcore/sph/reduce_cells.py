@@ -5,6 +5,7 @@ Mirror of shaders/sph/reduce_cells.comp: same names, same statement order, same 
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.pyramid import level_offset, level_size
@@ -12,7 +13,7 @@ from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def reduce_cells(spec):
+def reduce_cells(spec, real=np.float32):
     @njit
     def reduce_cells_main(node, params, cell_pyramid):
         P = params[0]

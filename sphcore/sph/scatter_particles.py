@@ -5,13 +5,14 @@ Mirror of shaders/sph/scatter_particles.comp: same names, same statement order, 
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def scatter_particles(spec):
+def scatter_particles(spec, real=np.float32):
     @njit
     def scatter_particles_main(i, params, particle_cell, particle_slot, cell_start, sorted_index):
         P = params[0]

@@ -6,13 +6,14 @@ Mirror of shaders/sph/sort_cells.comp: same names, same statement order, same st
 """
 from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
-def sort_cells(spec):
+def sort_cells(spec, real=np.float32):
     @njit
     def sort_cells_main(c, params, cell_pyramid, cell_start, sorted_index):
         P = params[0]
