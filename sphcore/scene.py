@@ -102,13 +102,28 @@ SCHEMA = {
 }
 
 MAX_PARTICLES = 50_000_000
+# the keys a folded parameter comes from, first the one to change when it overflows float32
+_FOLDED_FROM = {
+    "cohesion_coef": ("fluid.cohesion", "fluid.spacing", "fluid.smoothing_ratio"),
+    "viscosity_coef": ("fluid.viscosity", "fluid.spacing", "fluid.smoothing_ratio"),
+    "stiffness": ("fluid.stiffness", "fluid.rest_density"),
+}
+
+
+def _shown(value, width=60):
+    """repr(value), cut to `width` characters (a 400-digit integer makes no message clearer)."""
+    text = repr(value)
+    return text if len(text) <= width else f"{text[:width - 3]}..."
 
 
 def _check(where, key, value):
     """Validate one value against its Key; return it in canonical form."""
-    if key.kind == "str":
+    if key.kind == "str":  # the name: output files are named after it, in the output folder
         if not isinstance(value, str) or not value:
-            raise SceneError(f"{where}: expected a non-empty string, got {value!r}")
+            raise SceneError(f"{where}: expected a non-empty string, got {_shown(value)}")
+        if value.startswith(".") or any(c in value for c in "/\\") or not value.isprintable():
+            raise SceneError(f"{where} = {_shown(value)}: must be a file name (no /, \\, leading dot or "
+                             "control characters)")
         return value
     if "|" in key.kind:
         if value not in key.kind.split("|"):
@@ -127,6 +142,8 @@ def _check(where, key, value):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             expected = 'a number or "auto"' if key.kind == "dt" else "a number"
             raise SceneError(f"{where}: expected {expected} ({key.unit}), got {value!r}")
+        if isinstance(value, int) and not key.low <= value <= key.high:  # before float() overflows
+            raise SceneError(f"{where} = {_shown(value)}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
         value = float(value)
     elif key.kind == "vec":
         if (not isinstance(value, list) or len(value) not in (2, 3)
@@ -146,17 +163,17 @@ def _check(where, key, value):
                 raise SceneError(f"{where}[{i}]: min {lo} must be below max {hi} on every axis")
             blocks.append({"min": lo, "max": hi})
         return blocks
-    if not math.isfinite(value) or not key.low <= value <= key.high:
-        raise SceneError(f"{where} = {value!r}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
+    if not key.low <= value <= key.high:  # NaN is never within
+        raise SceneError(f"{where} = {_shown(value)}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
     return value
 
 
 def _merge(where, schema, given):
     if not isinstance(given, dict):
-        raise SceneError(f"{where}: expected a table, got {given!r}")
-    unknown = sorted(set(given) - set(schema))
+        raise SceneError(f"{where or 'scene'}: expected a table, got {_shown(given)}")
+    unknown = sorted(set(given) - set(schema), key=str)
     if unknown:
-        raise SceneError(f"{where}: unknown key {unknown[0]!r} (known: {', '.join(sorted(schema))})")
+        raise SceneError(f"{where or 'scene'}: unknown key {_shown(unknown[0])} (known: {', '.join(sorted(schema))})")
     out = {}
     for name, key in schema.items():
         path = f"{where}.{name}" if where else name
@@ -188,13 +205,17 @@ class Scene:
     def load(cls, path):
         path = Path(path)
         try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
+            data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark is allowed
         except FileNotFoundError:
             raise SceneError(f"{path}: no such scene file") from None
+        except OSError as e:  # a folder, no permission
+            raise SceneError(f"{path}: cannot read ({e.strerror})") from None
         except UnicodeDecodeError as e:
             raise SceneError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
         except tomllib.TOMLDecodeError as e:
             raise SceneError(f"{path}: malformed TOML: {e}") from None
+        except RecursionError:
+            raise SceneError(f"{path}: malformed TOML: arrays or tables nested too deeply") from None
         try:
             return cls.from_dict(data, str(path))
         except SceneError as e:
@@ -247,11 +268,12 @@ class Scene:
         lo, hi = self["domain.box_min"], self["domain.box_max"]
         for axis in range(dim):
             if hi[axis] - lo[axis] <= 2 * self.h:
-                raise SceneError(f"domain: box_max - box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
+                raise SceneError(f"domain.box_max - domain.box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
                                  f"2 h = {2 * self.h:g} m (h = fluid.spacing * fluid.smoothing_ratio)")
         for i, block in enumerate(self["fluid.blocks"]):
             if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(dim)):
-                raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box {lo} .. {hi}")
+                raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box domain.box_min .. domain.box_max = "
+                                 f"{lo} .. {hi}")
         count = sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"])
         if count == 0:
             raise SceneError(f"fluid.blocks: no particle fits at fluid.spacing = {self['fluid.spacing']:g} m")
@@ -261,7 +283,31 @@ class Scene:
         cells = int(np.prod(self.grid_dim))
         if cells > MAX_CELLS:
             raise SceneError(f"domain: the neighbour grid would need {cells} cells of size h = {self.h:g} m "
-                             f"(at most {MAX_CELLS}); shrink the box or raise fluid.spacing")
+                             f"(at most {MAX_CELLS}); shrink the box (domain.box_min, domain.box_max) or raise "
+                             "fluid.spacing")
+        self._check_numbers(int(count))
+
+    def _check_numbers(self, count):
+        """Reject what float32 cannot hold: a folded parameter beyond its range (cohesion at a tiny
+        h), or positions so far from the origin that float32 resolves them to more than h / 256
+        (the lattice would collapse onto itself)."""
+        with np.errstate(over="ignore"):
+            params = self.params(count)
+        for field in params.dtype.names:
+            if not np.isfinite(params[0][field]).all():
+                keys = _FOLDED_FROM.get(field, ("fluid.spacing", "fluid.smoothing_ratio"))
+                given = ", ".join(f"{k} = {self[k]:g}" for k in keys)
+                raise SceneError(f"{given}: the parameter {field} folded from them (h = {self.h:g} m) is beyond "
+                                 f"float32; lower {keys[0]} or raise fluid.spacing")
+        if self["physics.precision"] != "float32":
+            return
+        reach = max(abs(c) for c in self["domain.box_min"] + self["domain.box_max"])
+        resolution = float(np.spacing(np.float32(reach)))
+        if resolution > self.h / 256:
+            raise SceneError(f"fluid.spacing = {self['fluid.spacing']:g} m: float32 positions {reach:g} m from the "
+                             f"origin are {resolution:.2g} m apart, more than h / 256 (h = {self.h:g} m); move "
+                             "domain.box_min and domain.box_max nearer the origin, raise fluid.spacing, or set "
+                             'physics.precision = "float64"')
 
     @property
     def grid_dim(self):
