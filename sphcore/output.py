@@ -5,7 +5,6 @@ import io
 import os
 import re
 import xml.etree.ElementTree as ET
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -48,23 +47,16 @@ def atomic_write_bytes(path, data: bytes) -> None:
             pass
 
 
-def npz_bytes(**arrays) -> bytes:
-    """np.savez's format (uncompressed, no pickles), the same bytes for the same arrays: np.savez
-    stamps each member with the current time, here every member is dated 1980-01-01, so two
-    runs' outputs can be compared with `cmp`."""
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_STORED, allowZip64=True) as z:
-        for name, value in arrays.items():
-            with z.open(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), "w", force_zip64=True) as f:
-                np.lib.format.write_array(f, np.asanyarray(value), allow_pickle=False)
-    return buf.getvalue()
-
-
 def atomic_savez(path, **arrays) -> None:
-    """np.savez(path, **arrays) with the same all-or-nothing guarantee as atomic_write_bytes, and
-    the same bytes for the same arrays (npz_bytes). `path` is used as given (np.savez would
-    append '.npz' to a bare name; we don't)."""
-    atomic_write_bytes(path, npz_bytes(**arrays))
+    """np.savez(path, **arrays) with the same all-or-nothing guarantee as atomic_write_bytes.
+    `path` is used as given (np.savez would append '.npz' to a bare name; we don't).
+
+    The same arrays give the same bytes (zipfile dates every member 1980-01-01), so two runs'
+    files can be compared with `cmp`; except record arrays with padding, which numpy's writer
+    leaves uninitialised: store those as bytes (`a.view(np.uint8)`)."""
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def _data_array(parent, name, arr):
