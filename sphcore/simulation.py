@@ -228,7 +228,11 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
         out_dir.mkdir(parents=True, exist_ok=True)
         if checkpoint is None:
             atomic_write_bytes(out_dir / "scene.json", scene.to_json().encode())  # what render and resume read
-        series = SnapshotSeries(out_dir, scene["name"])
+        try:
+            series = SnapshotSeries(out_dir, scene["name"])
+        except (SyntaxError, ValueError) as e:  # xml.etree's ParseError is a SyntaxError
+            raise SimulationError(f"{out_dir / scene['name']}.pvd: not a readable ParaView collection ({e}); move "
+                                  "it away, or write to another folder") from None
         sim = Simulation(scene, backend, **backend_options)
         saved = None  # the step of the last checkpoint written or resumed from
 

@@ -228,3 +228,16 @@ def test_signal_stops_cleanly_and_the_run_resumes(tmp_path, capsys, signum, back
     assert (out_dir / "final.npz").read_bytes() == (tmp_path / "reference" / "final.npz").read_bytes()
     assert int(reference["step"]) == end
     assert pvd_steps(out_dir) == sorted(set(range(0, end + 1, 5)) | {stopped, end})
+
+
+def test_unreadable_series_is_named(tmp_path, capsys):
+    """A run appends to the .pvd in its folder; one that is not XML (edited by hand, another
+    program's) stops the run before any step, naming the file."""
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(TOML)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "dam.pvd").write_text("<VTKFile><Collection>")
+    assert main(["run", str(scene_file), "--out", str(tmp_path / "run")]) == 1
+    err = capsys.readouterr().err
+    assert f"sphcore: error: {tmp_path / 'run' / 'dam.pvd'}: not a readable ParaView collection" in err
+    assert "Traceback" not in err and (tmp_path / "run" / "dam.pvd").read_text() == "<VTKFile><Collection>"
