@@ -7,6 +7,7 @@ Every file is written to a temporary name and renamed, so a reader (or a resume)
 half of one.
 """
 import json
+import math
 import signal
 import sys
 import threading
@@ -47,19 +48,27 @@ class Simulation:
     `checkpoint()` and `restore(arrays)` save and put back everything a later step depends on."""
 
     _carried = None  # the CARRIED buffers as the last read() saw them
+    energy_start = None  # the energy at the first read, the bound for every later one
 
     def __init__(self, scene, backend="numba", **backend_options):
         self.scene = scene
         x0 = scene.initial_positions()
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
-        state = empty_state(self.params, scene["physics.precision"])
+        state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"])
         state["particle_x"][:, :self.dim] = x0
         self.stages = plan(scene)
         self.backend = make_backend(backend, self.params, state, self.stages, scene.spec,
                                     precision=scene["physics.precision"], **backend_options)
+        self.compute_densities()  # the start's: its energy, and its first snapshot's density
         self.step_count = 0
         self.checked_step = 0
+
+    def compute_densities(self):
+        """Density and pressure of the current positions (a step without its forces and motion)."""
+        for stage in self.stages:
+            if stage.name not in ("compute_forces", "integrate"):
+                self.backend.run_stage(stage)
 
     @property
     def time(self):
@@ -70,14 +79,49 @@ class Simulation:
         self.step_count += steps
 
     def read(self):
-        """The state in particle order (vectors of `dim` components), checked."""
+        """The state in particle order (vectors of `dim` components), checked. A check that fails
+        more than one step after the last good one is replayed from there a step at a time, so
+        the error names the first step at which the state went wrong."""
         raw = self.backend.read()
         state = in_particle_order(raw, self.dim)
-        self.check(state)
-        self.check_grid(raw["grid_status"])
+        try:
+            self.check(state)
+            self.check_grid(raw["grid_status"])
+        except SimulationError:
+            if self._carried is not None and self.step_count - self.checked_step > 1:
+                self._replay()
+            raise
         self.checked_step = self.step_count
         self._carried = {name: raw[name] for name in CARRIED}
+        if self.energy_start is None:
+            self.energy_start = sum(self.energy(state))
         return state
+
+    def _replay(self):
+        """Step again from the last good state, one step at a time, until a check fails (it raises)."""
+        failed_at = self.step_count
+        self.restore({"step": np.int64(self.checked_step), **{f"buffer_{k}": v for k, v in self._carried.items()}})
+        while self.step_count < failed_at:
+            self.advance(1)
+            self.read()
+
+    def energy(self, state):
+        """(kinetic + potential from box_min, internal energy of the equation of state) [J; 2D: J/m].
+        Nothing in the physics adds energy (walls and viscosity only take it away), so a run
+        whose energy grows is blowing up. Internal energy: the integral of p / rho^2 d rho, from
+        the densities of the last step (computed from the positions before it) or of the start."""
+        scene = self.scene
+        x, v = state["particle_x"].astype(np.float64), state["particle_v"].astype(np.float64)
+        rho = state["particle_rho"].astype(np.float64)
+        rho0, k = scene["fluid.rest_density"], scene["fluid.stiffness"]
+        r = np.maximum(rho / rho0, 1.0)  # the pressure is clamped at 0 below rest density
+        if scene["physics.equation_of_state"] == "tait":
+            internal = k / 7.0 * ((r ** 6 - 1.0) / 6.0 + 1.0 / r - 1.0)
+        else:
+            internal = k * (np.log(r) + 1.0 / r - 1.0)
+        g = np.asarray(scene["forces.gravity"]) if scene["physics.gravity"] else np.zeros(self.dim)
+        potential = -(x - np.asarray(scene["domain.box_min"])) @ g
+        return float(scene.mass * (0.5 * (v * v).sum(axis=1) + potential).sum()), float(scene.mass * internal.sum())
 
     @property
     def device_name(self):
@@ -112,7 +156,7 @@ class Simulation:
             else:
                 self.backend.state[name][...] = values
         self.step_count = self.checked_step = int(arrays["step"])
-        self._carried = None
+        self._carried = self.energy_start = None
 
     def check_grid(self, status):
         """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
@@ -138,9 +182,10 @@ class Simulation:
                 cause = (f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s" if dt > dt_max else
                          f"time.dt = {dt:g} s is within the estimated bound {dt_max:.3g} s ({bound}); "
                          "look for stiffness or viscosity at the ends of their ranges")
-                raise SimulationError(f"blow-up by step {self.step_count} (t = {self.time:.6g} s): {name} of "
+                raise SimulationError(f"blow-up at step {self.step_count} (t = {self.time:.6g} s): {name} of "
                                       f"particle {i} is {values[i]} ({int(bad.sum())} particles non-finite); "
                                       f"likely cause: {cause}")
+        self.check_energy(state)
         if self.scene["domain.boundary"] == "open":
             return
         x = state["particle_x"]
@@ -151,6 +196,42 @@ class Simulation:
         if outside.any():
             i = int(np.argmax(outside))
             raise SimulationError(f"step {self.step_count}: particle {i} at {x[i]} left the box {lo} .. {hi}")
+
+    def check_energy(self, state):
+        """Raise SimulationError if the energy grew past its start by 10 % (plus, per particle, the
+        potential energy of a quarter smoothing length and the kinetic energy of 1 % of the sound
+        speed), or a particle outruns twice the sound speed plus the free-fall speed (an explosion)."""
+        scene = self.scene
+        if self.energy_start is None or scene["physics.surface_tension"]:  # cohesion's energy is not counted
+            return
+        c = math.sqrt(scene["fluid.stiffness"])
+        g = math.sqrt(sum(a * a for a in scene["forces.gravity"])) if scene["physics.gravity"] else 0.0
+        allowed = (self.energy_start + 0.1 * abs(self.energy_start)
+                   + self.n * scene.mass * (g * scene.h / 4 + 0.5 * (0.01 * c) ** 2))
+        speed = np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1))
+        limit = 2.0 * (c + scene.speed_estimate())
+        energy = sum(self.energy(state))
+        if energy <= allowed and speed.max() <= limit:
+            return
+        i = int(np.argmax(speed))
+        dt_max, bound = stable_dt(scene, scene.speed_estimate())
+        dt = scene.dt
+        lo, hi = np.asarray(scene["domain.box_min"]), np.asarray(scene["domain.box_max"])
+        gap = min((state["particle_x"][i] - lo).min(), (hi - state["particle_x"][i]).min())
+        if dt > dt_max:
+            cause = f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s"
+        elif not (scene["physics.viscosity"] and scene["fluid.viscosity"] > 0):
+            cause = "no viscosity: nothing damps the particles' noise (raise fluid.viscosity)"
+        elif scene["domain.boundary"] == "walls" and gap < scene.h:
+            cause = (f"particle {i} is {gap:.3g} m from a wall, within h = {scene.h:g} m, where its mirror images "
+                     "(the walls' ghost particles) push it; a particle that starts on a wall is pushed by images "
+                     "that coincide with it: start the fluid at least fluid.spacing / 2 inside the box")
+        else:
+            cause = (f"dt = {dt:g} s is within the estimated {bound} bound {dt_max:.3g} s, yet the state gains "
+                     "energy: lower time.dt_fraction (a stiff fluid needs a fraction of the CFL bound)")
+        raise SimulationError(f"blow-up at step {self.step_count} (t = {self.time:.6g} s): the energy rose from "
+                              f"{self.energy_start:.4g} J to {energy:.4g} J and particle {i} moves at "
+                              f"{speed[i]:.3g} m/s (sound speed {c:.3g} m/s); likely cause: {cause}")
 
     def close(self):
         self.backend.close()

@@ -260,26 +260,28 @@ def blow_up_scene():
 
 
 def test_blow_up_names_step_particle_and_bound(tmp_path):
-    # Checked every 5 steps, so the mirrors keep stepping a NaN state for a step or two
-    # (zero densities, 0 / 0): that must give NaN as on the GPU, not a ZeroDivisionError.
+    # Checked every 5 steps; a failed check is replayed step by step from the last good one, so
+    # the error names the first bad step. The mirrors may step a NaN state (zero densities,
+    # 0 / 0): that must give NaN as on the GPU, not a ZeroDivisionError.
     scene = blow_up_scene()
     dt_max, bound = stable_dt(scene)
     assert bound == "CFL" and scene["time.dt"] > 1000 * dt_max
     with pytest.raises(SimulationError) as info:
         run(scene, "numba", steps=40, out_dir=tmp_path, progress=False)
     message = str(info.value)
-    m = re.search(r"blow-up by step (\d+) .*of particle (\d+) is .*likely cause: time\.dt = 0\.05 s exceeds "
+    m = re.search(r"blow-up at step (\d+) .*particle (\d+) .*likely cause: time\.dt = 0\.05 s exceeds "
                   r"the CFL bound", message)
     assert m, message
     step, particle = int(m.group(1)), int(m.group(2))
-    assert 0 < step < 40 and step % 5 == 0  # found at the first check after it went non-finite
-    assert 0 <= particle < 36
+    assert 0 < step < 40 and 0 <= particle < 36
+    # the first bad step: one step fewer passes every check
+    run(scene, "numba", steps=step - 1, out_dir=tmp_path / "before", progress=False)
 
     # the snapshots before the blow-up are complete; no final state was written
     assert not (tmp_path / "final.npz").exists()
     pvd = ET.parse(tmp_path / "blowup.pvd").getroot()
     files = [ds.get("file") for ds in pvd.iter("DataSet")]
-    assert files == [f"blowup_{s:07d}.vtp" for s in range(0, step, 5)]
+    assert files == [f"blowup_{s:07d}.vtp" for s in range(0, step, 5)]  # every snapshot before the blow-up
     for name in files:
         piece = ET.parse(tmp_path / name).getroot().find("PolyData/Piece")
         assert piece.get("NumberOfPoints") == "36"
@@ -301,7 +303,7 @@ def test_blow_up_through_cli(tmp_path, capsys):
         "output_every = 5",
     ]) + "\n")
     err = cli_error(capsys, "run", path, "--steps", 40, "--out", tmp_path / "out")
-    assert "blow-up by step" in err and "exceeds the CFL bound" in err
+    assert "blow-up at step" in err and "exceeds the CFL bound" in err
     assert (tmp_path / "out" / "blowup.pvd").exists()
     assert not (tmp_path / "out" / "final.npz").exists()
 

@@ -40,7 +40,7 @@ def test_experimental_series_are_carried_with_their_headers():
 
 @pytest.fixture(scope="module")
 def coarse_run():
-    return dam_break.run_dam_break({"resolution": 30, "t_end": 0.42}, progress=False)
+    return dam_break.run_dam_break({"resolution": 20, "t_end": 0.42}, progress=False)
 
 
 def test_front_follows_martin_and_moyce_at_a_coarse_resolution(coarse_run):
