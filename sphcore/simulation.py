@@ -100,7 +100,8 @@ class Simulation:
     def _replay(self):
         """Step again from the last good state, one step at a time, until a check fails (it raises)."""
         failed_at = self.step_count
-        self.restore({"step": np.int64(self.checked_step), **{f"buffer_{k}": v for k, v in self._carried.items()}})
+        self.restore({"step": np.int64(self.checked_step), "energy_start": np.float64(self.energy_start),
+                      **{f"buffer_{k}": v for k, v in self._carried.items()}})
         while self.step_count < failed_at:
             self.advance(1)
             self.read()
@@ -138,7 +139,8 @@ class Simulation:
             self.read()
         arrays = {f"buffer_{name}": values for name, values in self._carried.items()}
         # the parameter block as its bytes: numpy's .npy writer leaves a record's padding uninitialised
-        arrays.update(step=np.int64(self.step_count), scene=np.array(self.scene.to_json()),
+        arrays.update(energy_start=np.float64(self.energy_start), step=np.int64(self.step_count),
+                      scene=np.array(self.scene.to_json()),
                       params=self.params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
         return arrays
 
@@ -156,7 +158,10 @@ class Simulation:
             else:
                 self.backend.state[name][...] = values
         self.step_count = self.checked_step = int(arrays["step"])
-        self._carried = self.energy_start = None
+        self._carried = None
+        # the bound of the run's energy checks: the start's, carried by a checkpoint (absent: this state's)
+        start = float(arrays.get("energy_start", math.nan))
+        self.energy_start = start if math.isfinite(start) else None
 
     def check_grid(self, status):
         """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""

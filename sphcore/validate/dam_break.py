@@ -17,6 +17,7 @@ left wall after T = 2.5 (the column height climbs), at any time step; alpha = 0.
 liquid and its front's RMS against Table 2 is 0.04-0.05.
 """
 import csv
+import io
 import json
 import math
 import time
@@ -24,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sphcore.output import atomic_write_bytes
 from sphcore.scene import Scene
 from sphcore.validate import DATA_DIR
 
@@ -176,7 +178,7 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         write_csv(out / f"dam_break_{s['dimension']}d.csv", rows)
-        (out / f"dam_break_{s['dimension']}d.json").write_text(json.dumps(summary, indent=1))
+        atomic_write_bytes(out / f"dam_break_{s['dimension']}d.json", json.dumps(summary, indent=1).encode())
     return rows, summary
 
 
@@ -209,9 +211,6 @@ def errors(rows, settings):
 
 
 def write_csv(path, rows):
-    from sphcore.output import atomic_write_bytes
-    import io
-
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()

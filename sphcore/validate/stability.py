@@ -62,12 +62,67 @@ def cases():
     }
 
 
+def bytes_per_particle(precision="float32"):
+    """Device (or host) memory one particle takes in the solver's buffers [bytes]."""
+    from sphcore.backends import BUFFERS, REAL
+
+    real = 8 if precision == "float64" else 4
+    return sum((real if dtype == REAL else np.dtype(dtype).itemsize) * c
+               for dtype, c, length in BUFFERS.values() if length == "particles")
+
+
+def largest_count(backend="numba", precision="float32", device=None):
+    """(count, what sets it): the most particles the backend's memory allows, capped by the
+    scene's MAX_PARTICLES. Vulkan: the largest storage buffer (4 reals per particle) and 80 % of
+    the largest device-local heap; numba: half the host memory available now."""
+    import os
+
+    from sphcore.scene import MAX_PARTICLES
+
+    per = bytes_per_particle(precision)
+    real = 8 if precision == "float64" else 4
+    limits = {"the scene limit MAX_PARTICLES": MAX_PARTICLES}
+    if backend == "vulkan":
+        from vk_runner import Context
+
+        ctx = Context(device=device)
+        try:
+            limits[f"the largest storage buffer of {ctx.device_name}"] = ctx.max_storage_buffer_range // (4 * real)
+            mp = ctx.memory_properties
+            heap = max(mp.memoryHeaps[i].size for i in range(mp.memoryHeapCount) if mp.memoryHeaps[i].flags & 1)
+            limits[f"80 % of {ctx.device_name}'s {heap / 2**30:.0f} GiB"] = int(0.8 * heap / per)
+        finally:
+            ctx.close()
+    else:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        limits[f"half the host's {free / 2**30:.0f} GiB available"] = int(0.5 * free / per)
+    name = min(limits, key=limits.get)
+    return limits[name], name
+
+
+def largest_scene(count, precision="float32"):
+    """A 3D cube of (at most) `count` particles resting on the floor of a box 1.5 times as wide."""
+    side = int(round(count ** (1 / 3)))
+    while side ** 3 > count:
+        side -= 1
+    dx = 0.01
+    edge = side * dx
+    return Scene.from_dict({
+        "name": "largest_count", "physics": {"dimension": 3, "precision": precision},
+        "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [1.5 * edge, 1.5 * edge, 1.5 * edge]},
+        "fluid": {"blocks": [{"min": [0.0, 0.0, 0.0], "max": [edge + 1e-9, edge + 1e-9, edge + 1e-9]}],
+                  "spacing": dx, "stiffness": 400.0, "viscosity": 1.0},
+        "forces": {"gravity": [0.0, -9.81, 0.0]},
+        "time": {"dt": "auto", "steps": 1},
+    }, source="stability case largest_count")
+
+
 def speed_limit(s):
     """The speed past which Simulation.check_energy calls a run exploding [m/s]."""
     return 2.0 * (math.sqrt(s["fluid.stiffness"]) + s.speed_estimate())
 
 
-def run_case(name, s, positions, out_dir, backend="numba", **options):
+def run_case(name, s, positions, out_dir, backend="numba", steps=None, snapshots=True, **options):
     """Run case `name` for STEPS_SECONDS (at most MAX_STEPS); return its row: status stable (every
     check of Simulation.read passed: finite, inside the box, energy and speed bounded) or detected."""
     from sphcore.simulation import Simulation, SimulationError
@@ -76,7 +131,8 @@ def run_case(name, s, positions, out_dir, backend="numba", **options):
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
     series = SnapshotSeries(out, name)
-    steps = max(1, min(MAX_STEPS, math.ceil(STEPS_SECONDS / s.dt)))
+    add = series.add if snapshots else lambda *args: None
+    steps = steps or max(1, min(MAX_STEPS, math.ceil(STEPS_SECONDS / s.dt)))
     every = max(1, steps // 10)
     sim = Simulation(s, backend, **options)
     row = {"case": name, "particles": sim.n, "dt": s.dt, "dt_bound": stable_dt(s, s.speed_estimate())[0],
@@ -86,15 +142,16 @@ def run_case(name, s, positions, out_dir, backend="numba", **options):
             arrays = sim.checkpoint()
             x = arrays["buffer_particle_x"]
             x[:, :s.dim] = positions(s)
+            del arrays["energy_start"]  # a new start
             sim.restore(arrays)
             sim.compute_densities()
         state = sim.read()
         e_max, v_max = 0.0, 0.0
-        series.add(0, 0.0, state["particle_x"], {"velocity": state["particle_v"]})
+        add(0, 0.0, state["particle_x"], {"velocity": state["particle_v"]})
         while sim.step_count < steps:
             sim.advance(min(every, steps - sim.step_count))
             state = sim.read()
-            series.add(sim.step_count, sim.time, state["particle_x"], {"velocity": state["particle_v"]})
+            add(sim.step_count, sim.time, state["particle_x"], {"velocity": state["particle_v"]})
             e_max = max(e_max, sum(sim.energy(state)))
             v_max = max(v_max, float(np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1)).max()))
         row.update(energy_start=sim.energy_start, energy_max=e_max, speed_max=v_max, speed_limit=speed_limit(s), time=sim.time)
@@ -111,8 +168,9 @@ def run_case(name, s, positions, out_dir, backend="numba", **options):
     return row
 
 
-def run_matrix(out_dir, backend="numba", progress=True, only=None, **options):
-    """Run every case (or those named in `only`); write stability.json and stability.csv; return the rows."""
+def run_matrix(out_dir, backend="numba", progress=True, only=None, largest=False, **options):
+    """Run every case (or those named in `only`), and with `largest` the largest particle count the
+    backend's memory allows for 20 steps; write stability.json and stability.csv; return the rows."""
     from tqdm import tqdm
 
     from sphcore.output import atomic_write_bytes
@@ -124,6 +182,13 @@ def run_matrix(out_dir, backend="numba", progress=True, only=None, **options):
     for name, (s, positions, expected) in tqdm(todo.items(), desc="stability matrix", disable=not progress):
         row = run_case(name, s, positions, out, backend, **options)
         row["expected"] = expected
+        rows.append(row)
+        atomic_write_bytes(out / "stability.json", json.dumps(rows, indent=1).encode())
+    if largest:
+        count, limit = largest_count(backend, device=options.get("device"))
+        s = largest_scene(count)
+        row = run_case("largest_count", s, None, out, backend, steps=20, snapshots=False, **options)
+        row.update(expected="stable", limit=f"{count} particles allowed by {limit}")
         rows.append(row)
         atomic_write_bytes(out / "stability.json", json.dumps(rows, indent=1).encode())
     buf = io.StringIO()
