@@ -16,7 +16,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from sphcore.params import SHADER_DIR, pyramid_levels
+from sphcore.params import MAX_OBSTACLES, SHADER_DIR, pyramid_levels
 from sphcore.sph.apply_order import apply_order
 from sphcore.sph.cell_offsets import cell_offsets
 from sphcore.sph.clear_cells import clear_cells
@@ -51,9 +51,12 @@ BUFFERS = {
     "scratch_id": (np.uint32, 1, "particles"),
     "grid_status": (np.uint32, 1, 4),
     "particle_neighbours": (np.uint32, 2, "particles"),
+    "obstacle_box": (np.float32, 4, 2 * MAX_OBSTACLES),
 }
 # grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
 # [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
+# obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
+# spec.OBSTACLES pairs are read (float32, like the parameter block's walls).
 STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
 
 # stage -> (mirror factory, invocations: "particles" | "cells" | "nodes", buffers its shader binds in order)
@@ -72,10 +75,10 @@ STAGES = {
                                                "scratch_v", "scratch_id")),
     "compute_density": (compute_density, "particles", ("particle_x", "particle_rho", "particle_p",
                                                        "cell_pyramid", "cell_start", "particle_id",
-                                                       "particle_neighbours")),
+                                                       "particle_neighbours", "obstacle_box")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "particle_p", "cell_pyramid", "cell_start")),
-    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a")),
+                                                     "particle_p", "cell_pyramid", "cell_start", "obstacle_box")),
+    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box")),
 }
 
 Stage = namedtuple("Stage", "name level")  # level: the HistoPyramid level a reduce_cells builds, else 0
@@ -116,15 +119,40 @@ def buffer_length(length, params):
     return length
 
 
-def empty_state(params, precision="float32"):
-    """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`."""
+def empty_state(params, precision="float32", obstacles=()):
+    """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`,
+    and the box `obstacles` ([{"min": [...], "max": [...]}], a scene's domain.obstacles) in obstacle_box.
+    A box's face that lies on a wall is no face: the box is continued through the wall by the tank's
+    size (a box on the floor reaches below it), so that no particle slides between the two on the
+    wall, and none inside the box is put back out through the wall (integrate.comp)."""
     state = {}
     for name, (_, c, length) in BUFFERS.items():
         k = buffer_length(length, params)
         state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
+    if len(obstacles) > MAX_OBSTACLES:
+        raise ValueError(f"{len(obstacles)} obstacles: the obstacle_box buffer holds at most {MAX_OBSTACLES}")
+    wall_lo, wall_hi = params[0]["box_min"], params[0]["box_max"]
+    for k, box in enumerate(obstacles):
+        state["obstacle_box"][2 * k, :len(box["min"])] = box["min"]
+        state["obstacle_box"][2 * k + 1, :len(box["max"])] = box["max"]
+        lo, hi = state["obstacle_box"][2 * k, :3], state["obstacle_box"][2 * k + 1, :3]
+        lo[:] = np.where(lo <= wall_lo, wall_lo - (wall_hi - wall_lo), lo)
+        hi[:] = np.where(hi >= wall_hi, wall_hi + (wall_hi - wall_lo), hi)
     return state
+
+
+def check_obstacles(state, spec):
+    """A plan with spec.OBSTACLES boxes reads that many from obstacle_box: each must be a box (min
+    below max on every axis used), else the state was made without them (empty_state's
+    `obstacles`) and the fluid would flow through them unnoticed."""
+    box = np.asarray(state["obstacle_box"])
+    for k in range(spec.OBSTACLES):
+        if not (box[2 * k, :spec.DIM] < box[2 * k + 1, :spec.DIM]).all():
+            raise ValueError(f"the plan has {spec.OBSTACLES} obstacles but obstacle_box[{2 * k}:{2 * k + 2}] = "
+                             f"{box[2 * k:2 * k + 2].tolist()} is not a box: pass the scene's domain.obstacles "
+                             "to empty_state")
 
 
 def in_particle_order(state, dim=None):
@@ -283,4 +311,5 @@ def make_backend(name, params, state, stages, spec, **options):
     for Vulkan device, validation, steps_per_submit."""
     if name not in BACKENDS:
         raise ValueError(f"unknown backend {name!r}: choose one of {', '.join(BACKENDS)}")
+    check_obstacles(state, spec)
     return BACKENDS[name](params, state, stages, spec, **options)

@@ -84,6 +84,7 @@ def lattice_mass(spacing, h, rest_density, dim=2):
 # after float32 rounding of both cell coordinates (the error is far below 2^-12 of a cell).
 CELL_PADDING = 1.0 + 2.0**-12
 MAX_CELLS = 1 << 26
+MAX_OBSTACLES = 8  # box obstacles a scene may have: the obstacle_box buffer holds (min, max) of each
 
 
 def pyramid_levels(cell_total):
@@ -138,11 +139,13 @@ MC_SPEC_CONSTANTS = _constants((SHADER_DIR / "mc" / "constants.glsl").read_text(
 
 def _spec_class(name, constants):
     """A namedtuple of the constants' values with `values()`: the (constant_id, uint32 value)
-    pairs of a VkSpecializationInfo."""
+    pairs of a VkSpecializationInfo. A value not given is the shader's default (a constant added
+    for a new feature, such as OBSTACLES, leaves the code that does not know it unchanged)."""
     def values(self):
         return [(constants[key][0], int(value)) for key, value in self._asdict().items()]
 
-    return type(name, (namedtuple(name, list(constants)),), {"__slots__": (), "values": values})
+    base = namedtuple(name, list(constants), defaults=[default for _, default in constants.values()])
+    return type(name, (base,), {"__slots__": (), "values": values})
 
 
 Spec = _spec_class("Spec", SPEC_CONSTANTS)  # a scene's compile-time choices (shaders/sph/constants.glsl)

@@ -1,6 +1,6 @@
 #version 460
 // Density and pressure, one invocation per particle. Neighbours from the grid (GRID) or all
-// pairs; wall images (WALLS); linear or Tait equation of state (TAIT).
+// pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -8,6 +8,9 @@ layout(local_size_x_id = 0) in;
 #include "constants.glsl"
 #include "real.glsl"
 #include "cells.glsl"
+
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+#include "obstacles.glsl"
 
 layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 3) writeonly buffer ParticleRho { real particle_rho[]; };
@@ -34,9 +37,12 @@ void main() {
     real3 xi = particle_x[i].xyz;
     // [3] wall images: within h of a wall, particle i also sees every particle mirrored across
     //     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
-    //     that the wall nearer to xi on axis a is within h.
+    //     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
+    //     takes the place of its axis's wall where nearer (obstacles.glsl)
     real3 wall;
     uint mirrored = near_walls(xi, wall);
+    real3 inward;
+    mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
     //     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
     //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
@@ -60,7 +66,9 @@ void main() {
                 end = cell_start[last] + cell_pyramid[last];
             }
             for (uint j = start; j < end; ++j) {
-                real3 r = xi - reflected(particle_x[j].xyz, wall, image);
+                real3 xk = reflected(particle_x[j].xyz, wall, image);
+                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                real3 r = xi - xk;
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 < P.h2) {
                     real q = P.h2 - r2;

@@ -1,7 +1,7 @@
 #version 460
 // Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003), surface
 // tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-// Neighbours and wall images as in compute_density; each optional term is compiled out by its
+// Neighbours, wall and obstacle images as in compute_density; each optional term is compiled out by its
 // specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
@@ -10,6 +10,9 @@ layout(local_size_x_id = 0) in;
 #include "constants.glsl"
 #include "real.glsl"
 #include "cells.glsl"
+
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+#include "obstacles.glsl"
 
 layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
@@ -29,9 +32,12 @@ void main() {
     real rhoi = particle_rho[i];
     real pi = particle_p[i];
     real pi_rho2 = pi / (rhoi * rhoi);
-    // [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
+    // [3] wall and obstacle images, as in compute_density; an image's normal velocity is reversed
+    //     (free slip); `inward` points from each axis's mirror plane into the fluid
     real3 wall;
     uint mirrored = near_walls(xi, wall);
+    real3 inward;
+    mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] sums over every other particle and every image within h
     real3 f_pressure = real3(0.0);
     real3 f_viscosity = real3(0.0);
@@ -56,7 +62,9 @@ void main() {
             }
             for (uint j = start; j < end; ++j) {
                 if (j == i && image == 0u) continue;
-                real3 r = xi - reflected(particle_x[j].xyz, wall, image);
+                real3 xk = reflected(particle_x[j].xyz, wall, image);
+                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                real3 r = xi - xk;
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 >= P.h2) continue;
                 real rhoj = particle_rho[j];
@@ -64,13 +72,13 @@ void main() {
                 real rlen = sqrt(r2);
                 real hr = P.h - rlen;
                 // [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
-                //     NaN): an image coincides with i only on a wall, so push along that wall's
-                //     inward normal; two particles are pushed apart along x, antisymmetrically in
-                //     (i, j), so momentum is conserved
+                //     NaN): an image coincides with i only on a wall or an obstacle's face, so push
+                //     along its inward normal; two particles are pushed apart along x,
+                //     antisymmetrically in (i, j), so momentum is conserved
                 real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = real3(wall.x == P.box_min.x ? 1.0 : -1.0, 0.0, 0.0);
-                if (fy) r_hat = real3(0.0, wall.y == P.box_min.y ? 1.0 : -1.0, 0.0);
-                if (fz) r_hat = real3(0.0, 0.0, wall.z == P.box_min.z ? 1.0 : -1.0);
+                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
+                if (fy) r_hat = real3(0.0, inward.y, 0.0);
+                if (fz) r_hat = real3(0.0, 0.0, inward.z);
                 if (rlen > real(0.0)) r_hat = r / rlen;
                 // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
                 //     conserves momentum and energy with summation density (Monaghan 1992).

@@ -10,3 +10,6 @@ layout(constant_id = 6) const bool SURFACE_TENSION = false; // cohesion (Becker 
 layout(constant_id = 7) const bool GRAVITY = true;       // the gravity term
 layout(constant_id = 8) const bool NEIGHBOUR_STATS = false; // compute_density records each particle's
                                                          // neighbour count and a fingerprint of the set
+layout(constant_id = 11) const uint OBSTACLES = 0;       // box obstacles in obstacle_box (domain.obstacles);
+                                                         // 0: the obstacle code is compiled out. (9 and 10
+                                                         // are the marching-cubes constants, shaders/mc)

@@ -1,5 +1,5 @@
 #version 460
-// Symplectic Euler step and box walls, one invocation per particle.
+// Symplectic Euler step, box walls and obstacles, one invocation per particle.
 // Mirror: sphcore/sph/integrate.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -10,6 +10,7 @@ layout(local_size_x_id = 0) in;
 layout(std430, binding = 0) buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
@@ -29,7 +30,29 @@ void main() {
         if (DIM == 3u && x.z < P.box_min.z) { x.z = P.box_min.z; v.z = max(v.z, -P.restitution * v.z); }
         if (DIM == 3u && x.z > P.box_max.z) { x.z = P.box_max.z; v.z = min(v.z, -P.restitution * v.z); }
     }
-    // [4] store
+    // [4] obstacles (shaders/sph/obstacles.glsl): a particle that ended the step inside a box is put
+    //     back onto the box's face nearest to it, its normal speed there treated as at a wall. The
+    //     images across the faces keep particles off them; this catches the rare one that got in.
+    for (uint o = 0u; o < OBSTACLES; ++o) {
+        real3 lo = real3(obstacle_box[2u * o].xyz);
+        real3 hi = real3(obstacle_box[2u * o + 1u].xyz);
+        real3 depth = min(x - lo, hi - x);  // > 0: inside the box on that axis, that far from a face
+        if (depth.x <= real(0.0) || depth.y <= real(0.0) || (DIM == 3u && depth.z <= real(0.0))) continue;
+        if (depth.x <= depth.y && (DIM == 2u || depth.x <= depth.z)) {
+            bool lower = x.x - lo.x <= hi.x - x.x;
+            x.x = lower ? lo.x : hi.x;
+            v.x = lower ? min(v.x, -P.restitution * v.x) : max(v.x, -P.restitution * v.x);
+        } else if (DIM == 2u || depth.y <= depth.z) {
+            bool lower = x.y - lo.y <= hi.y - x.y;
+            x.y = lower ? lo.y : hi.y;
+            v.y = lower ? min(v.y, -P.restitution * v.y) : max(v.y, -P.restitution * v.y);
+        } else {
+            bool lower = x.z - lo.z <= hi.z - x.z;
+            x.z = lower ? lo.z : hi.z;
+            v.z = lower ? min(v.z, -P.restitution * v.z) : max(v.z, -P.restitution * v.z);
+        }
+    }
+    // [5] store
     particle_x[i] = real4(x, 0.0);
     particle_v[i] = real4(v, 0.0);
 }

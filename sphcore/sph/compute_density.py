@@ -1,5 +1,5 @@
 """Density and pressure, one invocation per particle. Neighbours from the grid (GRID) or all
-pairs; wall images (WALLS); linear or Tait equation of state (TAIT).
+pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
+from sphcore.sph.obstacles import obstacles
 from sphcore.workgroups import launcher
 
 
@@ -28,10 +29,12 @@ def neighbour_hash(id, image):
 def compute_density(spec, real=np.float32):
     DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    OBSTACLES = spec.OBSTACLES
 
     @njit
     def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start,
-                             particle_id, particle_neighbours):
+                             particle_id, particle_neighbours, obstacle_box):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -42,8 +45,11 @@ def compute_density(spec, real=np.float32):
         xi_z = particle_x[i, 2]
         # [3] wall images: within h of a wall, particle i also sees every particle mirrored across
         #     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
-        #     that the wall nearer to xi on axis a is within h.
+        #     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
+        #     takes the place of its axis's wall where nearer (obstacles.glsl)
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
         #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
@@ -69,6 +75,8 @@ def compute_density(spec, real=np.float32):
                 for j in range(start, end):
                     xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
                                            wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
                     r_x = xi_x - xk
                     r_y = xi_y - yk
                     r_z = xi_z - zk

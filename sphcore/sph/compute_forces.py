@@ -1,6 +1,6 @@
 """Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003), surface
 tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-Neighbours and wall images as in compute_density; each optional term is compiled out by its
+Neighbours, wall and obstacle images as in compute_density; each optional term is compiled out by its
 closure constant, as the shader's by its specialization constant.
 
 Mirror of shaders/sph/compute_forces.comp: same names, same statement order, same step
@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
+from sphcore.sph.obstacles import obstacles
 from sphcore.workgroups import launcher
 
 
@@ -21,10 +22,12 @@ def compute_forces(spec, real=np.float32):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    OBSTACLES = spec.OBSTACLES
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
-                            cell_pyramid, cell_start):
+                            cell_pyramid, cell_start, obstacle_box):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -39,8 +42,11 @@ def compute_forces(spec, real=np.float32):
         rhoi = particle_rho[i]
         pi = particle_p[i]
         pi_rho2 = pi / (rhoi * rhoi)
-        # [3] wall images, as in compute_density; an image's normal velocity is reversed (free slip)
+        # [3] wall and obstacle images, as in compute_density; an image's normal velocity is reversed
+        #     (free slip); `inward` points from each axis's mirror plane into the fluid
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] sums over every other particle and every image within h
         f_pressure_x = real(0.0)
         f_pressure_y = real(0.0)
@@ -74,6 +80,8 @@ def compute_forces(spec, real=np.float32):
                         continue
                     xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
                                            wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
                     r_x = xi_x - xk
                     r_y = xi_y - yk
                     r_z = xi_z - zk
@@ -85,18 +93,18 @@ def compute_forces(spec, real=np.float32):
                     rlen = np.sqrt(r2)
                     hr = P.h - rlen
                     # [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
-                    #     NaN): an image coincides with i only on a wall, so push along that wall's
-                    #     inward normal; two particles are pushed apart along x, antisymmetrically in
-                    #     (i, j), so momentum is conserved
+                    #     NaN): an image coincides with i only on a wall or an obstacle's face, so push
+                    #     along its inward normal; two particles are pushed apart along x,
+                    #     antisymmetrically in (i, j), so momentum is conserved
                     r_hat_x = real(-1.0) if i < j else real(1.0)
                     r_hat_y = real(0.0)
                     r_hat_z = real(0.0)
                     if fx:
-                        r_hat_x, r_hat_y, r_hat_z = real(1.0) if wall_x == P.box_min[0] else real(-1.0), real(0.0), real(0.0)
+                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
                     if fy:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(1.0) if wall_y == P.box_min[1] else real(-1.0), real(0.0)
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
                     if fz:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), real(1.0) if wall_z == P.box_min[2] else real(-1.0)
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
                     if rlen > real(0.0):
                         r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
                     # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
