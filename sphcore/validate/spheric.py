@@ -1,0 +1,249 @@
+"""SPHERIC benchmark test 2 (Issa & Violeau 2006): the 3D dam break of Kleefsman et al. (2005,
+J. Comput. Phys. 206, 363-393; experiment at MARIN) hitting a box on the floor. Water heights H1-H4
+and pressures P1-P8 against the measured series.
+
+`sphcore validate spheric --out DIR` writes DIR/spheric_test2.csv (t, H1..H4 in m, P1..P8 in Pa,
+every SAMPLE_DT), DIR/spheric_test2.json (settings, RMS of each series against the experiment over
+t <= 6 s or the run's end, particles, wall time, device) and DIR/spheric_test2.png.
+
+Geometry, in metres. Here y is up and z across the tank (the papers' y and z swapped, so that
+gravity is -y as in every scene of this project); x runs along the tank from the wall the box
+stands near. Tank 3.22 x 1 x 1; water 1.228 long, 0.55 high and 1 wide against the far wall
+(x = 1.992 .. 3.22), released at t = 0; box 0.161 along x (0.6635 .. 0.8245), 0.161 high, 0.403
+across, centred. On the tank's centre line z = 0.5: height gauges H1 at x = 0.496 (in the box's
+shadow), H2 at 0.992, H3 at 1.488, H4 at 2.638 (in the reservoir, so it starts at 0.55 m);
+pressure sensors P1-P4 on the box's face toward the water (x = 0.8245) at y = 0.021, 0.061, 0.101,
+0.141 and P5-P8 on its top (y = 0.161) at x = 0.8035, 0.7635, 0.7235, 0.6835.
+Sources: Lethe's model of this case (github.com/chaos-polymtl/lethe, examples/multiphysics/
+3d-dam-break: tank_with_obstacle.geo for tank, box and water, 3d-dam-break_postprocess.py for the
+gauges) and AQUAgpusph's (github.com/sanguinariojoe/aquagpusph, examples/3D/
+spheric_testcase2_dambreak/cMake/Create.py: the same box; the sensors 0.021 m + 0.04 m steps from
+the box's front bottom edge, up the face and along the top).
+
+The measured file (validation/data/spheric_test2_kleefsman2005_P1-P8_H1-H4.csv, AQUAgpusph's copy
+of the SPHERIC data) labels its height columns H1, H2, H3, H4, but they hold H3, H2, H1, H4: Lethe
+and AQUAgpusph both read them in that order, and the arrival times say so too: the first column
+is wetted at 0.19 s, the second at 0.36 s, the third at 0.92 s, as a front leaving x = 1.992
+reaches x = 1.488, then 0.992, and last 0.496 behind the box. The pressure columns are P1..P8.
+
+Height: the water volume above the gauge per unit floor area, sum_j dx^3 W2(r_j), r_j the
+horizontal distance of particle j from the gauge and W2 the 2D poly6 kernel of radius h (which
+integrates to 1 over the plane): the colour field integrated along the vertical. Each particle
+stands for a cube dx^3. A layer of depth D gives D (to the kernel's lattice sum, within 1.5 %),
+without a threshold on neighbour counts or density; spray above the gauge counts with its
+volume, not with its height, which is what a gauge wetted by a thin sheet reads too.
+Pressure: the SPH interpolation of the particles' pressure at the sensor, Shepard-normalised,
+sum_j p_j W(r_j) / sum_j W(r_j) with the 3D poly6 kernel of radius h (equal masses and densities
+near rho_0, so the volumes cancel): the sensor sits on the box's face with fluid on one side only,
+and the normalisation makes the average of a linear field exact there. No particle within h: 0
+(dry, as the experiment's sensors read at rest).
+
+Model: Tait equation of state with c = 40 m/s (10 times sqrt(2 g 0.55), the fastest free-fall
+speed, as in AQUAgpusph's setup), viscosity mu = alpha rho_0 c h / (2 dim + 4) with alpha = 0.02
+as in the 2D dam break (sphcore.validate.dam_break), walls and box free-slip mirror images,
+dt = "auto". The GPU run committed in validation/results/ is reproduced by
+benchmarks/spheric_gpu.sh.
+"""
+import csv
+import io
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sphcore.scene import Scene
+from sphcore.validate import DATA_DIR
+
+G = 9.81
+TANK = (3.22, 1.0, 1.0)  # x along, y up, z across
+WATER = (1.228, 0.55, 1.0)  # against the far wall x = 3.22
+BOX_MIN = (0.6635, 0.0, 0.5 - 0.403 / 2)
+BOX_MAX = (0.8245, 0.161, 0.5 + 0.403 / 2)
+GAUGES = {"H1": 0.496, "H2": 0.992, "H3": 1.488, "H4": 2.638}  # x of each height gauge, on z = 0.5
+SENSORS = {  # (x, y, z) of each pressure sensor
+    **{f"P{k + 1}": (BOX_MAX[0], 0.021 + 0.04 * k, 0.5) for k in range(4)},
+    **{f"P{k + 5}": (BOX_MAX[0] - 0.021 - 0.04 * k, BOX_MAX[1], 0.5) for k in range(4)},
+}
+DATA_FILE = "spheric_test2_kleefsman2005_P1-P8_H1-H4.csv"
+# gauge -> the column of DATA_FILE (0 = t) that holds it: the file's height columns are H3, H2, H1, H4
+DATA_COLUMNS = {**{f"P{k}": k for k in range(1, 9)}, "H3": 9, "H2": 10, "H1": 11, "H4": 12}
+SAMPLE_DT = 0.01  # s between samples
+RMS_UNTIL = 6.0  # s: the errors are taken over t <= this (or the run's end)
+
+SETTINGS = {  # what `sphcore validate spheric` runs
+    "spacing": 0.02,  # m: about 85,000 particles
+    "t_end": 6.0,  # s
+    "backend": "numba",
+    "precision": "float32",
+    "stiffness": 1600.0,  # m^2/s^2: c = 40 m/s
+    "alpha": 0.02,  # viscosity mu = alpha rho_0 c h / (2 dim + 4)
+    "smoothing_ratio": 2.0,
+    "dt_fraction": 1.0,  # of the stability bound (dt = "auto")
+}
+
+
+def spheric_scene(settings=None):
+    """The Scene of `settings` (SETTINGS overridden). The water block is whole particles, the
+    nearest to the experiment's 1.228 x 0.55 x 1 m, flush with the far wall and the floor."""
+    s = {**SETTINGS, **(settings or {})}
+    dx = s["spacing"]
+    n = [max(1, round(w / dx)) for w in WATER]
+    h = s["smoothing_ratio"] * dx
+    viscosity = s["alpha"] * 1000.0 * math.sqrt(s["stiffness"]) * h / 10.0
+    return Scene.from_dict({
+        "name": "spheric_test2",
+        "physics": {"dimension": 3, "equation_of_state": "tait", "precision": s["precision"]},
+        "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": list(TANK),
+                   "obstacles": [{"min": list(BOX_MIN), "max": list(BOX_MAX)}]},
+        "fluid": {"blocks": [{"min": [TANK[0] - n[0] * dx, 0.0, 0.0], "max": [TANK[0], n[1] * dx, min(n[2] * dx, TANK[2])]}],
+                  "spacing": dx, "smoothing_ratio": s["smoothing_ratio"], "stiffness": s["stiffness"],
+                  "viscosity": viscosity},
+        "forces": {"gravity": [0.0, -G, 0.0]},
+        "time": {"dt": "auto", "dt_fraction": s["dt_fraction"], "steps": 1},
+    }, source="SPHERIC test 2 (Kleefsman et al. 2005)")
+
+
+def water_heights(x, dx, h):
+    """{gauge: water height [m]}: the volume above the gauge per unit area (module docstring)."""
+    out = {}
+    for name, gx in GAUGES.items():
+        r2 = (x[:, 0] - gx) ** 2 + (x[:, 2] - 0.5) ** 2
+        q = np.clip(h * h - r2, 0.0, None)
+        out[name] = float(dx ** 3 * 4.0 / (math.pi * h ** 8) * (q ** 3).sum())
+    return out
+
+
+def pressures(x, p, h):
+    """{sensor: pressure [Pa]}: Shepard-normalised SPH interpolation at each sensor, 0 where dry."""
+    out = {}
+    for name, s in SENSORS.items():
+        q = np.clip(h * h - ((x - np.asarray(s)) ** 2).sum(axis=1), 0.0, None) ** 3
+        total = q.sum()
+        out[name] = float((q * p).sum() / total) if total > 0 else 0.0
+    return out
+
+
+def read_experiment():
+    """(t, {gauge: series}) of the measured file, the gauges named as in GAUGES and SENSORS."""
+    data = np.loadtxt(DATA_DIR / DATA_FILE, delimiter=",", comments="#", ndmin=2)
+    return data[:, 0], {name: data[:, col] for name, col in DATA_COLUMNS.items()}
+
+
+def errors(rows):
+    """{rms_<gauge>: RMS of simulated minus measured over the samples with t <= RMS_UNTIL}, with
+    the measured series interpolated at the simulated times (it is sampled every millisecond)."""
+    t_exp, exp = read_experiment()
+    t = np.array([r["t"] for r in rows])
+    use = t <= min(RMS_UNTIL, t_exp[-1])
+    out = {"rms_until_s": float(t[use][-1]) if use.any() else 0.0}
+    for name in list(GAUGES) + list(SENSORS):
+        sim = np.array([r[name] for r in rows])[use]
+        out[f"rms_{name}"] = float(np.sqrt(np.mean((sim - np.interp(t[use], t_exp, exp[name])) ** 2)))
+    return out
+
+
+def run_spheric(settings=None, out_dir=None, progress=True):
+    """Run the case; return (rows, summary). rows: one dict per sample (t, H1..H4, P1..P8).
+    Writes spheric_test2.csv and spheric_test2.json to out_dir if given; a run that blows up
+    writes the samples it has (the summary names the error) and raises SimulationError."""
+    from tqdm import tqdm
+
+    from sphcore.simulation import Simulation, SimulationError
+
+    s = {**SETTINGS, **(settings or {})}
+    scene = spheric_scene(s)
+    dt, dx, h = scene.dt, scene["fluid.spacing"], scene.h
+    every = max(1, round(SAMPLE_DT / dt))
+    steps = math.ceil(s["t_end"] / dt)
+    options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
+    start = time.perf_counter()
+    sim = Simulation(scene, s["backend"], **options)
+    rows, wall, error = [], 0.0, None
+    try:
+        with tqdm(total=steps, unit="step", disable=not progress, desc=f"SPHERIC test 2 [{s['backend']}]") as bar:
+            while True:
+                state = sim.read()
+                x, p = state["particle_x"].astype(np.float64), state["particle_p"].astype(np.float64)
+                rows.append({"t": sim.time, **water_heights(x, dx, h), **pressures(x, p, h)})
+                if sim.step_count >= steps:
+                    break
+                k = min(every, steps - sim.step_count)
+                tick = time.perf_counter()
+                sim.advance(k)
+                wall += time.perf_counter() - tick
+                bar.update(k)
+    except SimulationError as e:
+        error = str(e)
+    finally:
+        device = sim.device_name
+        sim.close()
+    summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": steps, "h": h, "viscosity": scene["fluid.viscosity"],
+               "wall_s": wall, "total_s": time.perf_counter() - start, "device": device, "error": error,
+               "gauges_x": GAUGES, "sensors": SENSORS, **errors(rows)}
+    if out_dir is not None:
+        write_results(rows, summary, out_dir)
+    if error:
+        kept = f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else ""
+        raise SimulationError(error + kept)
+    return rows, summary
+
+
+def write_results(rows, summary, out_dir):
+    """DIR/spheric_test2.csv and .json, each written whole or not at all."""
+    from sphcore.output import atomic_write_bytes
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    for r in rows:
+        writer.writerow({k: f"{v:.6g}" for k, v in r.items()})
+    atomic_write_bytes(out / "spheric_test2.csv", buf.getvalue().encode())
+    atomic_write_bytes(out / "spheric_test2.json", json.dumps(summary, indent=1).encode())
+
+
+def read_results(out_dir):
+    """(rows, summary) as write_results wrote them (for plotting a run made elsewhere)."""
+    out = Path(out_dir)
+    with (out / "spheric_test2.csv").open(encoding="utf-8") as f:
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    return rows, json.loads((out / "spheric_test2.json").read_text(encoding="utf-8"))
+
+
+def plot(rows, summary, path):
+    """Heights (top row) and pressures (two rows below) against the experiment, as a PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sphcore.output import atomic_write_bytes
+
+    t_exp, exp = read_experiment()
+    t = np.array([r["t"] for r in rows])
+    fig, axes = plt.subplots(3, 4, figsize=(15, 9), dpi=100)
+    for ax, name in zip(axes.flat, list(GAUGES) + list(SENSORS)):
+        ax.plot(t_exp, exp[name], color="tab:red", lw=0.7, label="Kleefsman et al. 2005")
+        ax.plot(t, [r[name] for r in rows], "k-", lw=1.0, label="sphcore")
+        where = (f"x = {GAUGES[name]:g} m" if name in GAUGES
+                 else "({:g}, {:g}) m".format(*SENSORS[name][:2]))
+        unit = "m" if name in GAUGES else "Pa"
+        ax.set_title(f"{name} at {where}: RMS {summary[f'rms_{name}']:.3g} {unit}", fontsize=8)
+        ax.set_xlim(0, max(t[-1], 0.1))
+        ax.tick_params(labelsize=7)
+        ax.set_ylabel(f"{'height' if name in GAUGES else 'pressure'} [{unit}]", fontsize=7)
+    axes[0, 0].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]", fontsize=7)
+    s = summary["settings"]
+    fig.suptitle(f"SPHERIC test 2: {summary['particles']} particles (dx = {s['spacing']:g} m), Tait, c = "
+                 f"{math.sqrt(s['stiffness']):g} m/s, {s['precision']}, {s['backend']} on {summary['device']}, "
+                 f"{summary['wall_s']:.0f} s", fontsize=9)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue())
+    return path
