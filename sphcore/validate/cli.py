@@ -14,6 +14,34 @@ def cmd_dam_break(args):
           f"simulated T + {summary['gate_shift_T']:g}; unshifted {summary['rms_Z_table2_unshifted']:.3f}) -> {png}")
 
 
+def cmd_sweep(args):
+    from sphcore.validate import sweep
+
+    rows = sweep.run_sweep(args.out, scheduler=args.scheduler, workers=args.workers, quick=args.quick,
+                           backends=args.backends)
+    ok = sum(r["status"] == "ok" for r in rows)
+    print("\n".join(sweep.recommendations(rows)["text"][1:3]))
+    print(f"{ok} of {len(rows)} points ok -> {args.out}/sweep.csv, sweep.json, pareto.png, recommendations.json")
+
+
+def cmd_report(args):
+    from sphcore.validate import report
+
+    path = report.build_report(args.out, results=args.results)
+    print(f"wrote {path}")
+
+
+def backend_list(text):
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in ("numba", "vulkan")]
+    if unknown or not names:
+        raise ValueError
+    return names
+
+
+backend_list.__name__ = "list of backends (numba, vulkan)"
+
+
 def positive(kind):
     def parse(text):
         value = kind(text)
@@ -25,7 +53,7 @@ def positive(kind):
 
 
 def add_commands(sub):
-    """Add `validate` (with its cases) to the subparsers `sub` of `sphcore`."""
+    """Add `validate` (with its cases), `sweep` and `report` to the subparsers `sub` of `sphcore`."""
     from sphcore.validate.dam_break import SETTINGS
 
     p = sub.add_parser("validate", help="run a validation case against published experiments")
@@ -45,3 +73,22 @@ def add_commands(sub):
     d.add_argument("--neighbour-search", choices=["grid", "all_pairs"])
     d.add_argument("--t-end", type=positive(float), help=f"simulated seconds (default {SETTINGS['t_end']:g})")
     d.set_defaults(func=cmd_dam_break)
+
+    p = sub.add_parser("sweep", help="speed/accuracy sweep of the 2D dam break through Dask: table, Pareto front, "
+                       "recommendations")
+    p.add_argument("--out", required=True, help="output folder (sweep.csv/json, pareto.png, recommendations.json/txt); "
+                   "points already there with status ok are not run again")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask scheduler (tcp://host:8786) whose workers run "
+                   "the points (default: a local cluster)")
+    p.add_argument("--workers", type=positive(int), help="local cluster: worker processes, the cores shared "
+                   "among them as numba threads (default 1)")
+    p.add_argument("--backends", type=backend_list, default=["numba"], help="comma-separated: numba,vulkan "
+                   "(default numba; Vulkan on a CPU device gets a few small points)")
+    p.add_argument("--quick", action="store_true", help="a small design (resolution 8-10, 0.1 s) for tests and CI")
+    p.set_defaults(func=cmd_sweep)
+    p = sub.add_parser("report", help="an HTML page of the validation results: plots, tables, settings, versions, "
+                       "hardware")
+    p.add_argument("--out", required=True, help="output folder: index.html and its images")
+    p.add_argument("--results", help="folder the results are read from (default: --out); the 2D dam break is "
+                   "run into --out where neither has it")
+    p.set_defaults(func=cmd_report)

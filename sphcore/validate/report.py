@@ -1,0 +1,369 @@
+"""`sphcore report --out DIR`: one HTML page of the validation results, generated, never edited
+by hand.
+
+It reads what the other commands wrote (from `--results`, then DIR): the 2D dam break (run
+into DIR at the default settings where neither folder has dam_break_2d.json), the sweep
+(sweep.json or sweep.csv, pareto.png, recommendations.json), and any files named after the
+other sections' prefixes (the 3D dam break, SPHERIC test 2, the stability matrix): a JSON list
+of dicts or a CSV becomes a table, a JSON dict a table of its keys, a PNG a picture. A part not
+found says "not run" and names the command that makes it. Then the versions and the hardware.
+Pictures are copied next to index.html, so the folder is the whole report.
+"""
+import csv
+import html
+import json
+import math
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+
+from sphcore.output import atomic_write_bytes
+
+REPO = Path(__file__).resolve().parent.parent.parent
+# prefix -> (title, the command that writes its files); read generically
+OTHER_SECTIONS = {
+    "dam_break_3d": ("3D dam break", "sphcore validate dam-break --dimension 3 --out {dir}"),
+    "spheric_test2": ("SPHERIC benchmark test 2: water heights H1–H4", "sphcore validate spheric --out {dir}"),
+    "stability": ("Stability at the extremes", "sphcore validate stability --out {dir}"),
+}
+PACKAGES = ("numpy", "numba", "vulkan", "matplotlib", "dask", "distributed", "tqdm")
+SWEEP_COLUMNS = ("point", "varied", "backend", "resolution", "dt_fraction", "precision", "equation_of_state", "stiffness",
+                 "neighbour_search", "alpha", "t_end", "status", "dtype", "device", "particles", "steps", "dt", "wall_s",
+                 "steps_per_s", "rms_Z_table2", "rms_Z_table2_unshifted", "best_shift_T_table2", "error")
+STYLE = """body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;font-size:13px;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}
+th{background:#eee}td.s{text-align:left}img{max-width:100%}.missing{color:#a00}pre{white-space:pre-wrap;font-size:13px}
+details{margin:.5em 0}code{background:#f4f4f4;padding:0 3px}"""
+
+
+# ---- HTML pieces ----
+
+def esc(value):
+    return html.escape(str(value))
+
+
+def cell(value):
+    """A table cell: floats to 4 significant digits, missing values as a dash, text left-aligned."""
+    if value is None or isinstance(value, float) and math.isnan(value):
+        return "<td>–</td>"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return f'<td class="s">{esc(value)}</td>'
+    return f"<td>{value:.4g}</td>" if isinstance(value, float) else f"<td>{value}</td>"
+
+
+def table(rows, columns=None):
+    """A list of dicts as an HTML table, columns in first-seen order unless given."""
+    if columns is None:
+        columns = list(dict.fromkeys(k for r in rows for k in r))
+    head = "".join(f"<th>{esc(c)}</th>" for c in columns)
+    body = "\n".join("<tr>" + "".join(cell(r.get(c)) for c in columns) + "</tr>" for r in rows)
+    return f"<table><tr>{head}</tr>\n{body}</table>"
+
+
+def key_values(d):
+    """A dict's scalar entries as a two-column table; nested dicts and lists of dicts as their own tables."""
+    scalars = {k: v for k, v in d.items() if not isinstance(v, (dict, list))}
+    parts = [table([{"key": k, "value": v} for k, v in scalars.items()], ["key", "value"])] if scalars else []
+    for k, v in d.items():
+        if isinstance(v, dict):
+            parts.append(f"<h4>{esc(k)}</h4>" + key_values(v))
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            parts.append(f"<h4>{esc(k)}</h4>" + table(v))
+        elif isinstance(v, list):
+            parts.append(f"<h4>{esc(k)}</h4><p>{esc(', '.join(map(str, v)))}</p>")
+    return "\n".join(parts)
+
+
+def render_json(value):
+    if isinstance(value, list) and all(isinstance(x, dict) for x in value):
+        return table(value)
+    if isinstance(value, dict):
+        return key_values(value)
+    return f"<pre>{esc(json.dumps(value, indent=1))}</pre>"
+
+
+def read_csv(path):
+    """Rows of a CSV with numbers as floats (ints where whole), empty cells as None."""
+    def number(text):
+        if text == "":
+            return None
+        try:
+            value = float(text)
+        except ValueError:
+            return text
+        return int(value) if value.is_integer() and "." not in text and "e" not in text.lower() else value
+    with open(path, newline="", encoding="utf-8") as f:
+        return [{k: number(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def shown(path):
+    """`path` relative to the current folder where it lies below it (a report made in a checkout
+    names validation/results, not the checkout's absolute path)."""
+    relative = os.path.relpath(path)
+    return str(path) if relative.startswith("..") else relative
+
+
+def details(summary, body, open_=False):
+    return f"<details{' open' if open_ else ''}><summary>{summary}</summary>\n{body}\n</details>"
+
+
+class Page:
+    """Sections of the page, and the pictures copied next to it."""
+
+    def __init__(self, out, dirs):
+        self.out, self.dirs, self.parts = out, dirs, []
+
+    def find(self, name):
+        return next((d / name for d in self.dirs if (d / name).is_file()), None)
+
+    def matching(self, prefix, suffixes=(".json", ".csv", ".png")):
+        names = {p.name for d in self.dirs if d.is_dir() for p in d.glob(f"{prefix}*") if p.suffix in suffixes}
+        return [self.find(n) for n in sorted(names)]
+
+    def image(self, path, alt=""):
+        """An <img> of `path`, copied next to index.html when it lies elsewhere."""
+        target = self.out / path.name
+        if path.resolve() != target.resolve():
+            shutil.copyfile(path, target)
+        return f'<p><img src="{esc(path.name)}" alt="{esc(alt or path.name)}"></p>'
+
+    def link(self, path):
+        return f'<code>{esc(shown(path))}</code>'
+
+    def add(self, anchor, title, body):
+        self.parts.append((anchor, title, body))
+
+    def missing(self, command):
+        return f'<p class="missing">not run: <code>{esc(command.format(dir=shown(self.dirs[0])))}</code> writes it</p>'
+
+    def files(self, prefix):
+        """Every JSON, CSV and PNG named `prefix*`: JSON and CSV as tables (a CSV beside a JSON of the
+        same name only linked), PNG as pictures."""
+        out = []
+        paths = self.matching(prefix)
+        stems = {p.stem for p in paths if p.suffix == ".json"}
+        for p in paths:
+            if p.suffix == ".png":
+                out.append(self.image(p))
+            elif p.suffix == ".json":
+                out.append(f"<h3>{esc(p.name)}</h3>" + render_json(json.loads(p.read_text())))
+            elif p.stem in stems:
+                out.append(f"<p>The same rows as CSV: {self.link(p)}</p>")
+            else:
+                rows = read_csv(p)
+                out.append(details(f"{esc(p.name)}: {len(rows)} rows", table(rows)))
+        return out
+
+    def html(self, title, head):
+        toc = "".join(f'<li><a href="#{a}">{esc(t)}</a></li>' for a, t, _ in self.parts)
+        body = "\n".join(f'<h2 id="{a}">{esc(t)}</h2>\n{b}' for a, t, b in self.parts)
+        return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{esc(title)}</title>'
+                f"<style>{STYLE}</style></head>\n<body><h1>{esc(title)}</h1>\n{head}\n<ul>{toc}</ul>\n{body}\n</body></html>\n")
+
+
+# ---- sections ----
+
+def dam_break_2d(page, settings=None):
+    """The 2D dam break at the default settings: picture, errors, settings; run into DIR if absent."""
+    from sphcore.validate import dam_break
+
+    found = page.find("dam_break_2d.json")
+    if found is None:
+        rows, summary = dam_break.run_dam_break(settings, page.out)
+        note = f"<p>Run by this report into {page.link(page.out)} (no dam_break_2d.json was there).</p>"
+        csv_path = page.out / "dam_break_2d.csv"
+    else:
+        summary = json.loads(found.read_text())
+        csv_path = found.with_suffix(".csv")
+        rows = read_csv(csv_path) if csv_path.is_file() else None
+        note = f"<p>Read from {page.link(found)}.</p>"
+    png = page.find("dam_break_2d.png")
+    if png is None and rows:
+        png = dam_break.plot(rows, summary, page.out / "dam_break_2d.png")
+    errors = [{"series": label, "RMS of Z (T + gate shift)": summary.get(f"rms_Z_{name}"),
+               "RMS of Z (unshifted)": summary.get(f"rms_Z_{name}_unshifted"), "points": summary.get(f"points_{name}")}
+              for name, (_, label) in dam_break.FRONT_SERIES.items()]
+    run = {k: summary.get(k) for k in ("particles", "steps", "dt", "wall_s", "min_neighbours", "gate_shift_T",
+                                       "best_shift_T_table2")}
+    body = [note, page.image(Path(png), "Z(T) and H(tau)") if png else "<p>no picture (no CSV of the run)</p>",
+            "<h3>Errors against the measured fronts</h3>", table(errors),
+            f"<p>Gate: {'met' if (summary.get('rms_Z_table2') or math.inf) <= 0.15 else 'not met'} "
+            f"(RMS against Table 2 <= 0.15).</p>",
+            "<h3>Run</h3>", key_values(run), "<h3>Settings</h3>", key_values(summary.get("settings", {}))]
+    if rows:
+        body.append(details(f"dam_break_2d.csv: {len(rows)} rows", table(rows)))
+    page.add("dam_break_2d", "2D dam break after Martin & Moyce (1952)", "\n".join(body))
+
+
+def sweep_section(page):
+    """The sweep: recommendations, the Pareto picture, the table."""
+    from sphcore.validate.sweep import label
+
+    source = page.find("sweep.json") or page.find("sweep.csv")
+    if source is None:
+        page.add("sweep", "Speed and accuracy: the sweep", page.missing("sphcore sweep --out {dir}"))
+        return
+    meta = {}
+    if source.suffix == ".json":
+        data = json.loads(source.read_text())
+        rows, meta = data["rows"], data.get("sweep", {})
+    else:
+        rows = read_csv(source)
+    body = [f"<p>Read from {page.link(source)}: {len(rows)} points, "
+            f"{sum(r.get('status') == 'ok' for r in rows)} ok.</p>"]
+    rec_path = page.find("recommendations.json")
+    if rec_path is not None:
+        rec = json.loads(rec_path.read_text())
+        picks = [{"which": name.replace("_", " "), **rec[name]} for name in ("cheapest_meeting_threshold", "most_accurate")
+                 if rec.get(name)]
+        body += ["<h3>Recommendations</h3>", table(picks, ["which", "label", "rms_Z_table2", "wall_s", "point"]),
+                 "<pre>" + esc("\n".join(rec.get("text", []))) + "</pre>"]
+    else:
+        body.append(page.missing("sphcore sweep --out {dir}").replace("not run", "recommendations.json missing"))
+    pareto = page.find("pareto.png")
+    body.append(page.image(pareto, "error against cost") if pareto else "<p>no pareto.png</p>")
+    labelled = [{"label": label(r) if all(k in r for k in ("backend", "t_end")) else "", **r} for r in rows]
+    body.append(details(f"The table ({len(rows)} rows; all columns in {source.name})",
+                        table(labelled, ["label"] + [c for c in SWEEP_COLUMNS if any(c in r for r in rows)]), open_=True))
+    if meta:
+        body += ["<h3>How it ran</h3>", key_values(meta)]
+    page.add("sweep", "Speed and accuracy: the sweep", "\n".join(body))
+
+
+def other_sections(page):
+    for prefix, (title, command) in OTHER_SECTIONS.items():
+        parts = page.files(prefix)
+        page.add(prefix, title, "\n".join(parts) if parts else page.missing(command))
+
+
+# ---- environment ----
+
+def git_commit():
+    """The checkout's commit, and whether the working tree differs from it; or why there is none."""
+    if not (REPO / ".git").exists():
+        return "not a git checkout"
+    try:
+        run = lambda *a: subprocess.run(["git", "-C", str(REPO), *a], capture_output=True, text=True,  # noqa: E731
+                                        timeout=20, check=True).stdout.strip()
+        commit = run("rev-parse", "HEAD")
+        changed = run("status", "--porcelain", "--untracked-files=no").splitlines()
+    except (OSError, subprocess.SubprocessError) as e:
+        return f"unknown ({type(e).__name__})"
+    return commit + (f" (the working tree differs from it in {len(changed)} tracked files)" if changed else "")
+
+
+def versions():
+    out = {"sphcore": _version("sphcore"), "git commit": git_commit(), "python": platform.python_version()}
+    out.update({name: _version(name) for name in PACKAGES})
+    return out
+
+
+def _version(name):
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def memory_gib():
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def vulkan_devices():
+    """One dict per Vulkan device (name, type, API, driver), or a one-line reason there is none."""
+    try:
+        import vulkan as vk
+
+        from vk_runner import Context
+        ctx = Context()
+    except Exception as e:  # noqa: BLE001 - no loader, no driver, no package: said in the report
+        return f"no Vulkan device could be opened: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+    try:
+        devices = []
+        for d in vk.vkEnumeratePhysicalDevices(ctx.instance):
+            p = vk.vkGetPhysicalDeviceProperties(d)
+            api = p.apiVersion
+            devices.append({"name": text(vk, p.deviceName), "type": ctx._type_name(p.deviceType),
+                            "vendor id": hex(p.vendorID), "API": f"{api >> 22}.{(api >> 12) & 0x3ff}.{api & 0xfff}",
+                            "driver": driver(vk, d, p), "float64 in shaders":
+                                bool(vk.vkGetPhysicalDeviceFeatures(d).shaderFloat64),
+                            "used by default": text(vk, p.deviceName) == ctx.device_name})
+        return devices
+    finally:
+        ctx.close()
+
+
+def text(vk, value):
+    """A Vulkan char array as str (the vulkan package converts some, not those of structs we fill)."""
+    return value if isinstance(value, str) else vk.ffi.string(value).decode()
+
+
+def driver(vk, device, props):
+    """The driver's name and version string (Vulkan 1.2's driver properties), else its version number."""
+    v = props.driverVersion
+    number = (f"{v >> 22}.{(v >> 14) & 0xff}.{(v >> 6) & 0xff}" if props.vendorID == 0x10DE  # NVIDIA's packing
+              else f"{v >> 22}.{(v >> 12) & 0x3ff}.{v & 0xfff}")
+    try:
+        drv = vk.VkPhysicalDeviceDriverProperties(sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES)
+        vk.vkGetPhysicalDeviceProperties2(device, vk.VkPhysicalDeviceProperties2(
+            sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, pNext=drv))
+        name, info = text(vk, drv.driverName), text(vk, drv.driverInfo)
+    except Exception:  # noqa: BLE001 - a device or loader before Vulkan 1.2: the number alone
+        name = info = ""
+    return f"{name} {info} (version {number})".strip() if name else f"version {number}"
+
+
+def hardware():
+    memory = memory_gib()
+    return {"CPU": cpu_model(), "cores": os.cpu_count(),
+            "cores usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+            "memory": f"{memory:.1f} GiB" if memory else "unknown", "system": platform.platform(),
+            "host": platform.node()}
+
+
+def environment(page, argv):
+    devices = vulkan_devices()
+    vk_part = table(devices) if isinstance(devices, list) else f"<p>{esc(devices)}</p>"
+    body = ["<h3>Versions</h3>", key_values(versions()), "<h3>Hardware</h3>", key_values(hardware()),
+            "<h3>Vulkan devices</h3>", vk_part,
+            "<h3>This report</h3>", key_values({"command": argv, "results read from": ", ".join(map(shown, page.dirs)),
+                                                 "generated": time.strftime("%Y-%m-%d %H:%M:%S %z")})]
+    page.add("environment", "Run settings, versions and hardware", "\n".join(body))
+
+
+def build_report(out, results=None, settings=None, argv=None):
+    """Write DIR/index.html (and its pictures) from the results in `results` and DIR; return its path.
+    `settings` overrides the 2D dam break's defaults where the report has to run it (for tests)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    dirs = [Path(results)] if results else []
+    if not dirs or dirs[0].resolve() != out.resolve():
+        dirs.append(out)
+    page = Page(out, dirs)
+    dam_break_2d(page, settings)
+    sweep_section(page)
+    other_sections(page)
+    environment(page, argv or " ".join(["sphcore", *sys.argv[1:]]))
+    head = ("<p>Generated by <code>sphcore report</code>: every number and picture on this page comes from the "
+            "files named in its section. Do not edit by hand; run the commands again.</p>")
+    path = out / "index.html"
+    atomic_write_bytes(path, page.html("sphcore validation report", head).encode())
+    return path

@@ -1,0 +1,105 @@
+"""The HTML report (`sphcore report`): its sections, the numbers of the files it read, "not run"
+with the command for what is missing, versions and hardware, pictures that exist; and the 2D dam
+break run into the folder where it is missing."""
+import json
+import os
+import platform
+import re
+
+import numba
+import numpy as np
+
+from sphcore.cli import main
+from sphcore.validate import report, sweep
+from sphcore.validate.dam_break import SETTINGS, write_csv
+
+
+def images(page, folder):
+    """The <img> sources of `page`, each checked to be a file in `folder`."""
+    sources = re.findall(r'<img src="([^"]+)"', page)
+    assert all((folder / s).is_file() and (folder / s).stat().st_size > 1000 for s in sources), sources
+    return sources
+
+
+def write_results(folder):
+    """A results folder as the other commands leave it, with numbers no run would give."""
+    folder.mkdir()
+    rows = [{"t": t, "front_x": 0.25 + t, "column_height": 0.5 - t / 2, "T": t * 8.86, "Z": 1 + 4 * t,
+             "tau": t * 6.26, "H": 1 - t} for t in np.linspace(0.0, 0.5, 11)]
+    write_csv(folder / "dam_break_2d.csv", rows)
+    summary = {"settings": {**SETTINGS, "resolution": 37}, "particles": 2738, "dt": 1.234e-4, "steps": 4052,
+               "wall_s": 41.7, "min_neighbours": 3, "gate_shift_T": 0.175, "rms_Z_table2": 0.0876543,
+               "points_table2": 14, "rms_Z_table2_unshifted": 0.2468, "best_shift_T_table2": 0.19,
+               "rms_Z_koshizuka": 0.1357, "points_koshizuka": 8, "rms_Z_koshizuka_unshifted": 0.3579}
+    (folder / "dam_break_2d.json").write_text(json.dumps(summary))
+    table = [{**sweep.at(resolution=r), "point": i, "varied": "resolution", "status": "ok", "wall_s": 0.7 * r,
+              "rms_Z_table2": 0.9 / r, "steps": 100 * r, "particles": 2 * r * r} for i, r in enumerate((10, 20))]
+    table.append({**sweep.at(dt_fraction=2.0), "point": 2, "varied": "dt_fraction", "status": "failed",
+                  "error": "SimulationError: blow-up by step 77"})
+    sweep.write_table(folder, table, {"workers": 1})
+    sweep.write_outputs(folder, table)
+    stability = [{"name": "dt_10x_bound", "status": "detected", "step": 1234, "particle": 56, "cause": "time step",
+                  "message": "blow-up by step 1234"}, {"name": "one_particle", "status": "stable", "step": 300}]
+    (folder / "stability.json").write_text(json.dumps(stability))
+    (folder / "stability.csv").write_text("name,status\ndt_10x_bound,detected\none_particle,stable\n")
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    fig.savefig(folder / "spheric_test2_heights.png")
+    plt.close(fig)
+
+
+def test_report_shows_what_it_read(tmp_path, capsys):
+    results, out = tmp_path / "results", tmp_path / "report"
+    write_results(results)
+    assert main(["report", "--out", str(out), "--results", str(results)]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {out / 'index.html'}"
+    page = (out / "index.html").read_text()
+
+    for anchor in ("dam_break_2d", "sweep", "dam_break_3d", "spheric_test2", "stability", "environment"):
+        assert f'<h2 id="{anchor}">' in page
+    # the 2D dam break: its numbers, settings, the picture drawn from its CSV
+    for number in ("0.08765", "0.2468", "0.1357", "2738", "4052", "41.7", "<td>37</td>"):
+        assert number in page, number
+    # the sweep: recommendations and table; a failed point with its error
+    assert "Cheapest with RMS &lt;= 0.15: res 10 (RMS 0.090, 7.00 s)" in page
+    assert "SimulationError: blow-up by step 77" in page
+    # other sections: a JSON list as a table, a PNG by prefix, "not run" with the command
+    assert "<td>1234</td>" in page and "dt_10x_bound" in page and "stability.csv" in page
+    assert "not run: <code>sphcore validate dam-break --dimension 3 --out" in page
+    assert sorted(images(page, out)) == ["dam_break_2d.png", "pareto.png", "spheric_test2_heights.png"]
+    # versions and hardware
+    for text in (f">{np.__version__}</td>", f">{numba.__version__}</td>", platform.python_version(),
+                 f"<td>{os.cpu_count()}</td>", report.cpu_model()):
+        assert text in page, text
+    devices = report.vulkan_devices()
+    assert (devices[0]["name"] if isinstance(devices, list) else devices) in page
+
+
+def test_report_runs_the_dam_break_where_it_is_missing(tmp_path, monkeypatch):
+    """The run itself is tested in test_validation.py; here a stand-in with the same outputs, so
+    that this test does not pay numba's compilation."""
+    from sphcore.validate import dam_break
+    calls = []
+
+    def run(settings, out_dir, progress=True):
+        calls.append((settings, out_dir))
+        rows = [{"t": t, "front_x": 0.25, "column_height": 0.5, "T": t, "Z": 1.0, "tau": t, "H": 1.0} for t in (0.0, 0.1)]
+        summary = {"settings": {**dam_break.SETTINGS, **settings}, "particles": 4321, "steps": 2, "dt": 0.05,
+                   "wall_s": 0.5, "gate_shift_T": 0.175, "rms_Z_table2": 0.0654321}
+        write_csv(out_dir / "dam_break_2d.csv", rows)
+        (out_dir / "dam_break_2d.json").write_text(json.dumps(summary))
+        return rows, summary
+
+    monkeypatch.setattr(dam_break, "run_dam_break", run)
+    path = report.build_report(tmp_path, settings={"resolution": 8})
+    assert calls == [({"resolution": 8}, tmp_path)]
+    page = path.read_text()
+    assert "Run by this report" in page and "<td>4321</td>" in page and "<td>0.06543</td>" in page
+    assert images(page, tmp_path) == ["dam_break_2d.png"]
+    assert page.count('class="missing">not run') == 4  # the sweep, 3D, SPHERIC, stability
+    # a second report reads what the first one ran
+    report.build_report(tmp_path)
+    assert len(calls) == 1 and "Read from" in path.read_text()
