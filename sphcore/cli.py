@@ -110,6 +110,8 @@ def main(argv=None):
     p.add_argument("--every", type=int, default=1, help="render every K-th snapshot (default 1: all)")
     p.add_argument("--format", choices=["vtp", "ply"], default="vtp", help="mesh file format (default vtp)")
     p.set_defaults(func=cmd_render)
+    from sphcore.validate.cli import add_commands
+    add_commands(sub)  # validate, sweep, report
     args = parser.parse_args(argv)
     if args.command == "run" and not args.scene and not args.resume:
         parser.error("run: give a SCENE, or --resume RUN_DIR")

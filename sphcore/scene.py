@@ -16,7 +16,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from sphcore.params import CELL_PADDING, MAX_CELLS, Spec, fold_parameters, lattice_mass
+from sphcore.params import CELL_PADDING, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
 
 
 def stable_dt(scene, max_speed=0.0):
@@ -48,7 +48,7 @@ class Key:
     low: float
     high: float
     doc: str
-    kind: str = "float"  # float | int | vec | str | bool | blocks | dt (a float or "auto") | one of "a|b|c"
+    kind: str = "float"  # float | int | vec | str | bool | blocks | boxes (blocks, or none) | dt (a float or "auto") | one of "a|b|c"
 
 
 SCHEMA = {
@@ -71,6 +71,9 @@ SCHEMA = {
         "box_max": Key([1.0, 1.0], "m", -1e3, 1e3, "upper corner of the walls (open: the hash period ends here)", "vec"),
         "boundary": Key("walls", "", 0, 0, "walls: a closed box; open: unbounded, grid cells hashed modulo "
                         "the box (seed 2)", "walls|open"),
+        "obstacles": Key([], "m", -1e3, 1e3, "solid boxes inside the domain that the fluid flows around (images "
+                         f"across their faces, as at the walls): [{{min = [...], max = [...]}}], at most {MAX_OBSTACLES}",
+                         "boxes"),
     },
     "fluid": {
         "blocks": Key([{"min": [0.1, 0.1], "max": [0.4, 0.4]}], "m", -1e3, 1e3,
@@ -150,8 +153,8 @@ def _check(where, key, value):
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
             raise SceneError(f"{where}: expected [x, y] or [x, y, z] ({key.unit}), got {value!r}")
         return [_check(f"{where}[{i}]", Key(0, key.unit, key.low, key.high, ""), v) for i, v in enumerate(value)]
-    elif key.kind == "blocks":
-        if not isinstance(value, list) or not value:
+    elif key.kind in ("blocks", "boxes"):
+        if not isinstance(value, list) or (not value and key.kind == "blocks"):
             raise SceneError(f"{where}: expected a list of {{min = [...], max = [...]}} tables, got {value!r}")
         blocks = []
         corner = Key(0, key.unit, key.low, key.high, "", "vec")
@@ -262,6 +265,8 @@ class Scene:
                    "forces.gravity": self["forces.gravity"]}
         for i, block in enumerate(self["fluid.blocks"]):
             vectors[f"fluid.blocks[{i}].min"] = block["min"]
+        for i, box in enumerate(self["domain.obstacles"]):
+            vectors[f"domain.obstacles[{i}].min"] = box["min"]
         for where, v in vectors.items():
             if len(v) != dim:
                 raise SceneError(f"{where} = {v} has {len(v)} components but physics.dimension = {dim}")
@@ -274,6 +279,7 @@ class Scene:
             if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(dim)):
                 raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box domain.box_min .. domain.box_max = "
                                  f"{lo} .. {hi}")
+        self._check_obstacles()
         count = sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"])
         if count == 0:
             raise SceneError(f"fluid.blocks: no particle fits at fluid.spacing = {self['fluid.spacing']:g} m")
@@ -286,6 +292,25 @@ class Scene:
                              f"(at most {MAX_CELLS}); shrink the box (domain.box_min, domain.box_max) or raise "
                              "fluid.spacing")
         self._check_numbers(int(count))
+
+    def _check_obstacles(self):
+        """Obstacles: at most MAX_OBSTACLES, inside the box, and no particle of a block starting
+        inside one (strictly: on a face is allowed)."""
+        lo, hi, obstacles = self["domain.box_min"], self["domain.box_max"], self["domain.obstacles"]
+        if len(obstacles) > MAX_OBSTACLES:
+            raise SceneError(f"domain.obstacles: {len(obstacles)} boxes, at most {MAX_OBSTACLES}")
+        if obstacles and self["domain.boundary"] != "walls":
+            raise SceneError('domain.obstacles need domain.boundary = "walls" (the box is their frame)')
+        dx = self["fluid.spacing"]
+        for k, box in enumerate(obstacles):
+            if any(box["min"][a] < lo[a] or box["max"][a] > hi[a] for a in range(self.dim)):
+                raise SceneError(f"domain.obstacles[{k}]: {box} is not inside the box domain.box_min .. "
+                                 f"domain.box_max = {lo} .. {hi}")
+            for i, block in enumerate(self["fluid.blocks"]):
+                axes = [block["min"][a] + dx * (np.arange(n) + 0.5) for a, n in enumerate(self._lattice_shape(block))]
+                if all(((x > box["min"][a]) & (x < box["max"][a])).any() for a, x in enumerate(axes)):
+                    raise SceneError(f"fluid.blocks[{i}] = {block}: particles would start inside domain.obstacles[{k}] = "
+                                     f"{box}; shrink the block or move the obstacle")
 
     def _check_numbers(self, count):
         """Reject what float32 cannot hold: a folded parameter beyond its range (cohesion at a tiny
@@ -328,13 +353,14 @@ class Scene:
         return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(len(block["min"]))]
 
     def initial_positions(self):
-        """Particles at cell centres of a square (cubic) lattice filling each block, float32 (N, dim)."""
+        """Particles at cell centres of a square (cubic) lattice filling each block, (N, dim), in the
+        scene's precision."""
         dx = self["fluid.spacing"]
         parts = []
         for block in self["fluid.blocks"]:
             axes = [block["min"][a] + dx * (np.arange(k) + 0.5) for a, k in enumerate(self._lattice_shape(block))]
             parts.append(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, self.dim))
-        return np.concatenate(parts).astype(np.float32)
+        return np.concatenate(parts).astype(np.float64 if self["physics.precision"] == "float64" else np.float32)
 
     @property
     def mass(self):
@@ -347,7 +373,7 @@ class Scene:
         return Spec(DIM=self.dim, GRID=physics["neighbour_search"] == "grid",
                     WALLS=self["domain.boundary"] == "walls", TAIT=physics["equation_of_state"] == "tait",
                     VISCOSITY=physics["viscosity"], SURFACE_TENSION=physics["surface_tension"],
-                    GRAVITY=physics["gravity"], NEIGHBOUR_STATS=False)
+                    GRAVITY=physics["gravity"], NEIGHBOUR_STATS=False, OBSTACLES=len(self["domain.obstacles"]))
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""

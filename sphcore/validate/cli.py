@@ -1,6 +1,8 @@
 """Subcommands `sphcore validate ...`, `sphcore sweep` and `sphcore report` (added to sphcore.cli)."""
 from pathlib import Path
 
+from sphcore.scene import SceneError
+
 
 def cmd_dam_break(args):
     from sphcore.validate import dam_break
@@ -8,10 +10,25 @@ def cmd_dam_break(args):
     settings = {k: v for k, v in vars(args).items() if k in dam_break.SETTINGS and v is not None}
     out = Path(args.out)
     rows, summary = dam_break.run_dam_break(settings, out)
-    png = dam_break.plot(rows, summary, out / f"dam_break_{summary['settings']['dimension']}d.png")
+    try:
+        png = dam_break.plot(rows, summary, out / f"dam_break_{summary['settings']['dimension']}d.png")
+    except ImportError:
+        png = "no PNG: matplotlib is not installed (pip install matplotlib)"
     print(f"{summary['particles']} particles, {summary['steps']} steps of {summary['dt']:.3g} s in {summary['wall_s']:.1f} s; "
           f"RMS of Z against Martin & Moyce Table 2: {summary['rms_Z_table2']:.3f} ({summary['points_table2']} points, "
           f"simulated T + {summary['gate_shift_T']:g}; unshifted {summary['rms_Z_table2_unshifted']:.3f}) -> {png}")
+
+
+def cmd_spheric(args):
+    from sphcore.validate import spheric
+
+    settings = {k: v for k, v in vars(args).items()
+                if k in ("backend", "device", "spacing", "t_end", "dt_fraction") and v is not None}
+    rows, summary = spheric.run_spheric(settings, args.out)
+    png = spheric.plot(rows, summary, Path(args.out) / "spheric_test2.png")
+    rms = ", ".join(f"{g} {summary[f'rms_{g}']:.3f}" for g in spheric.GAUGES)
+    print(f"{summary['particles']} particles, {summary['steps']} steps of {summary['dt']:.3g} s in {summary['wall_s']:.1f} s "
+          f"on {summary['device']}; RMS of the heights against Kleefsman et al. 2005 (m): {rms} -> {png}")
 
 
 def cmd_sweep(args):
@@ -42,6 +59,20 @@ def backend_list(text):
 backend_list.__name__ = "list of backends (numba, vulkan)"
 
 
+def cmd_stability(args):
+    from sphcore.validate import stability
+
+    options = {"device": args.device} if args.backend == "vulkan" else {}
+    unknown = sorted(set(args.case or ()) - set(stability.cases()))
+    if unknown:
+        raise SceneError(f"--case {unknown[0]}: no such case (known: {', '.join(stability.cases())})")
+    rows = stability.run_matrix(args.out, args.backend, only=args.case, largest=args.largest, **options)
+    for r in rows:
+        where = f" at step {r['step']}, particle {r['particle']}: {r['cause']}" if r["status"] == "detected" else ""
+        print(f"{r['case']:18} {r['status']:8}{where}")
+    print(f"-> {args.out}/stability.json, stability.csv")
+
+
 def positive(kind):
     def parse(text):
         value = kind(text)
@@ -67,12 +98,30 @@ def add_commands(sub):
     d.add_argument("--precision", choices=["float32", "float64"])
     d.add_argument("--equation-of-state", choices=["linear", "tait"])
     d.add_argument("--stiffness", type=positive(float), help=f"k = c^2 in m^2/s^2 (default {SETTINGS['stiffness']:g})")
-    d.add_argument("--alpha", type=float, help=f"viscosity as alpha of mu = alpha rho_0 c h / 8 (default {SETTINGS['alpha']:g})")
+    d.add_argument("--alpha", type=float, help=f"viscosity as alpha of mu = alpha rho_0 c h / (2 dim + 4) (default {SETTINGS['alpha']:g})")
     d.add_argument("--viscosity", type=float, help="Pa s (replaces --alpha)")
     d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
     d.add_argument("--neighbour-search", choices=["grid", "all_pairs"])
     d.add_argument("--t-end", type=positive(float), help=f"simulated seconds (default {SETTINGS['t_end']:g})")
+    d.add_argument("--depth", type=positive(int), help=f"3D: particles across the channel (default {SETTINGS['depth']})")
+    d.add_argument("--smoothing-ratio", type=positive(float), help="h / dx (default 2; seed 2: 2.857)")
     d.set_defaults(func=cmd_dam_break)
+    d = cases.add_parser("stability", help="the stability matrix: every parameter at its extremes")
+    d.add_argument("--out", required=True, help="output folder (a folder of snapshots per case, stability.json/.csv)")
+    d.add_argument("--backend", choices=["numba", "vulkan"], default="numba")
+    d.add_argument("--device", help="Vulkan device: index or part of its name")
+    d.add_argument("--case", action="append", help="run only this case (repeatable)")
+    d.add_argument("--largest", action="store_true", help="also the largest particle count the memory allows (GPU)")
+    d.set_defaults(func=cmd_stability)
+    s = cases.add_parser("spheric", help="SPHERIC test 2 (Kleefsman et al. 2005): 3D dam break hitting a box, "
+                         "water heights H1-H4 and pressures P1-P8")
+    s.add_argument("--out", required=True, help="output folder (spheric_test2.csv, .json, .png)")
+    s.add_argument("--backend", choices=["numba", "vulkan"], help="(default numba)")
+    s.add_argument("--device", help="Vulkan device: index or part of its name")
+    s.add_argument("--spacing", type=positive(float), help="particle spacing dx in m (default 0.02: 85,400 particles)")
+    s.add_argument("--t-end", type=positive(float), help="simulated seconds (default 6)")
+    s.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
+    s.set_defaults(func=cmd_spheric)
 
     p = sub.add_parser("sweep", help="speed/accuracy sweep of the 2D dam break through Dask: table, Pareto front, "
                        "recommendations")
