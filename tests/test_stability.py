@@ -64,15 +64,19 @@ def test_one_particle_falls_freely_and_stays_inside(tmp_path):
     sim.close()
 
 
-def test_two_coincident_particles_separate_symmetrically():
+def test_two_coincident_particles_stay_finite_and_fall_together():
+    """r = 0 between them must not give NaN (normalize(0)); two particles alone are far below the
+    rest density, so their pressure is clamped to 0 and nothing pushes them apart."""
     scene, _, _ = stability.cases()["two_coincident"]
     sim = Simulation(scene)
+    x0 = sim.read()["particle_x"]
     sim.advance(20)
-    x = sim.read()["particle_x"]
+    state = sim.read()
     sim.close()
-    assert np.isfinite(x).all()
-    assert abs(x[0, 0] - x[1, 0]) > 0  # pushed apart along x
-    assert (x[0, 0] + x[1, 0]) / 2 == pytest.approx(0.21, abs=1e-6)  # momentum conserved
+    x = state["particle_x"]
+    assert np.isfinite(x).all() and np.isfinite(state["particle_v"]).all()
+    assert state["particle_p"].max() == 0 and state["particle_rho"].max() < scene["fluid.rest_density"]
+    assert np.array_equal(x[0], x[1]) and x[0, 1] < x0[0, 1]
 
 
 def test_auto_dt_is_the_bound_times_the_fraction():
