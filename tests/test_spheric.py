@@ -243,11 +243,19 @@ def test_sensors_read_hydrostatic_pressure():
     assert dry == {name: 0.0 for name in spheric.SENSORS}
 
 
+def test_running_mean_keeps_a_ramp_and_removes_a_saw_tooth():
+    t = np.arange(0.0, 2.0, 0.01)
+    ramp = spheric.running_mean(t, 3.0 * t)
+    inner = (t > 0.1) & (t < 1.9)
+    assert np.allclose(ramp[inner], 3.0 * t[inner])
+    assert np.allclose(spheric.running_mean(t, np.where(np.arange(len(t)) % 2, 1.0, -1.0))[inner], 0.0, atol=0.1)
+
+
 def test_the_scene_file_is_the_validation_scene():
     from sphcore.cli import scene_path
     given, built = Scene.load(scene_path("spheric_test2")), spheric.spheric_scene()
     for key in ("domain.box_min", "domain.box_max", "forces.gravity", "physics.equation_of_state", "fluid.spacing",
-                "fluid.smoothing_ratio", "fluid.stiffness", "fluid.viscosity", "time.dt"):
+                "fluid.smoothing_ratio", "fluid.stiffness", "fluid.viscosity", "time.dt", "time.dt_fraction"):
         assert given[key] == pytest.approx(built[key]) if key != "physics.equation_of_state" else given[key] == built[key]
     for a, b in ((given["domain.obstacles"], built["domain.obstacles"]), (given["fluid.blocks"], built["fluid.blocks"])):
         assert len(a) == len(b) == 1 and a[0]["min"] == pytest.approx(b[0]["min"]) and a[0]["max"] == pytest.approx(b[0]["max"])
