@@ -120,7 +120,7 @@ def add_commands(sub):
     s.add_argument("--device", help="Vulkan device: index or part of its name")
     s.add_argument("--spacing", type=positive(float), help="particle spacing dx in m (default 0.02: 85,400 particles)")
     s.add_argument("--t-end", type=positive(float), help="simulated seconds (default 6)")
-    s.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
+    s.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 0.5)")
     s.set_defaults(func=cmd_spheric)
 
     p = sub.add_parser("sweep", help="speed/accuracy sweep of the 2D dam break through Dask: table, Pareto front, "
