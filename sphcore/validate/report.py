@@ -67,15 +67,16 @@ def table(rows, columns=None):
 
 def key_values(d):
     """A dict's scalar entries as a two-column table; nested dicts and lists of dicts as their own tables."""
-    scalars = {k: v for k, v in d.items() if not isinstance(v, (dict, list))}
+    nested = lambda v: isinstance(v, dict) or isinstance(v, list) and any(isinstance(x, (dict, list)) for x in v)  # noqa: E731
+    scalars = {k: ", ".join(map(str, v)) if isinstance(v, list) else v for k, v in d.items() if not nested(v)}
     parts = [table([{"key": k, "value": v} for k, v in scalars.items()], ["key", "value"])] if scalars else []
     for k, v in d.items():
         if isinstance(v, dict):
             parts.append(f"<h4>{esc(k)}</h4>" + key_values(v))
-        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+        elif nested(v) and all(isinstance(x, dict) for x in v):
             parts.append(f"<h4>{esc(k)}</h4>" + table(v))
-        elif isinstance(v, list):
-            parts.append(f"<h4>{esc(k)}</h4><p>{esc(', '.join(map(str, v)))}</p>")
+        elif nested(v):
+            parts.append(f"<h4>{esc(k)}</h4><pre>{esc(json.dumps(v))}</pre>")
     return "\n".join(parts)
 
 
@@ -142,21 +143,24 @@ class Page:
         return f'<p class="missing">not run: <code>{esc(command.format(dir=shown(self.dirs[0])))}</code> writes it</p>'
 
     def files(self, prefix):
-        """Every JSON, CSV and PNG named `prefix*`: JSON and CSV as tables (a CSV beside a JSON of the
-        same name only linked), PNG as pictures."""
+        """Every JSON, CSV and PNG named `prefix*`, grouped by name: the picture, the JSON as tables,
+        the CSV as a table (only linked where a JSON of the same name says it already)."""
         out = []
         paths = self.matching(prefix)
-        stems = {p.stem for p in paths if p.suffix == ".json"}
-        for p in paths:
-            if p.suffix == ".png":
-                out.append(self.image(p))
-            elif p.suffix == ".json":
-                out.append(f"<h3>{esc(p.name)}</h3>" + render_json(json.loads(p.read_text())))
-            elif p.stem in stems:
-                out.append(f"<p>The same rows as CSV: {self.link(p)}</p>")
-            else:
-                rows = read_csv(p)
-                out.append(details(f"{esc(p.name)}: {len(rows)} rows", table(rows)))
+        order = {".png": 0, ".json": 1, ".csv": 2}
+        for stem in sorted({p.stem for p in paths}):
+            group = sorted((p for p in paths if p.stem == stem), key=lambda p: order[p.suffix])
+            out.append(f"<h3>{esc(stem)}</h3>")
+            for p in group:
+                if p.suffix == ".png":
+                    out.append(self.image(p))
+                elif p.suffix == ".json":
+                    out.append(f"<p>From {self.link(p)}:</p>" + render_json(json.loads(p.read_text())))
+                elif any(q.suffix == ".json" for q in group):
+                    out.append(f"<p>The series as CSV: {self.link(p)}</p>")
+                else:
+                    rows = read_csv(p)
+                    out.append(details(f"{esc(p.name)}: {len(rows)} rows", table(rows)))
         return out
 
     def html(self, title, head):
