@@ -398,7 +398,7 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
         params, spec = scene.params(len(position)), scene.spec
     finally:
         scene.config["physics"]["neighbour_search"] = scene_grid
-    state = empty_state(params)
+    state = empty_state(params, obstacles=scene["domain.obstacles"])  # the density sees their faces
     state["particle_x"][:, :3] = position
     cells = int(params[0]["cell_total"])
     sorter = make_backend(backend, params, state, neighbour_stages(cells) + [Stage("compute_density")], spec,
