@@ -54,7 +54,13 @@ def write_results(folder):
 def test_report_shows_what_it_read(tmp_path, capsys):
     results, out = tmp_path / "results", tmp_path / "report"
     write_results(results)
-    assert main(["report", "--out", str(out), "--results", str(results)]) == 0
+    (tmp_path / "empty").mkdir()
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "dam_break_2d.json").write_text(json.dumps({"settings": {"resolution": 160, "backend": "vulkan"},
+                                                         "rms_Z_table2": 0.0975319, "particles": 51200}))
+    assert main(["report", "--out", str(out), "--results", str(tmp_path / "empty"), "--results", str(results),
+                 "--results", str(other)]) == 0
     assert capsys.readouterr().out.strip() == f"wrote {out / 'index.html'}"
     page = (out / "index.html").read_text()
 
@@ -63,6 +69,7 @@ def test_report_shows_what_it_read(tmp_path, capsys):
     # the 2D dam break: its numbers, settings, the picture drawn from its CSV
     for number in ("0.08765", "0.2468", "0.1357", "2738", "4052", "41.7", "<td>37</td>"):
         assert number in page, number
+    assert "<td>160</td>" in page and "<td>0.09753</td>" in page and "<td>51200</td>" in page  # another run
     # the sweep: recommendations and table; a failed point with its error
     assert "Cheapest with RMS &lt;= 0.15: res 10 (RMS 0.090, 7.00 s)" in page
     assert "SimulationError: blow-up by step 77" in page

@@ -138,6 +138,6 @@ def add_commands(sub):
     p = sub.add_parser("report", help="an HTML page of the validation results: plots, tables, settings, versions, "
                        "hardware")
     p.add_argument("--out", required=True, help="output folder: index.html and its images")
-    p.add_argument("--results", help="folder the results are read from (default: --out); the 2D dam break is "
-                   "run into --out where neither has it")
+    p.add_argument("--results", action="append", help="a folder the results are read from, before --out "
+                   "(repeatable: the first that has a file is used); the 2D dam break is run into --out where none has it")
     p.set_defaults(func=cmd_report)

@@ -1,13 +1,13 @@
 """`sphcore report --out DIR`: one HTML page of the validation results, generated, never edited
 by hand.
 
-It reads what the other commands wrote (from `--results`, then DIR): the 2D dam break (run
-into DIR at the default settings where neither folder has dam_break_2d.json), the sweep
-(sweep.json or sweep.csv, pareto.png, recommendations.json), and any files named after the
-other sections' prefixes (the 3D dam break, SPHERIC test 2, the stability matrix): a JSON list
-of dicts or a CSV becomes a table, a JSON dict a table of its keys, a PNG a picture. A part not
-found says "not run" and names the command that makes it. Then the versions and the hardware.
-Pictures are copied next to index.html, so the folder is the whole report.
+It reads what the other commands wrote (from the `--results` folders in order, then DIR): the
+2D dam break (run into DIR at the default settings where no folder has dam_break_2d.json), the
+sweep (sweep.json or sweep.csv, pareto.png, recommendations.json), and any files named after
+the other sections' prefixes (the 3D dam break, SPHERIC test 2, the stability matrix): a JSON
+list of dicts or a CSV becomes a table, a JSON dict a table of its keys, a PNG a picture. A
+part not found says "not run" and names the command that makes it. Then the versions and the
+hardware. Pictures are copied next to index.html, so the folder is the whole report.
 """
 import csv
 import html
@@ -201,7 +201,20 @@ def dam_break_2d(page, settings=None):
             "<h3>Run</h3>", key_values(run), "<h3>Settings</h3>", key_values(summary.get("settings", {}))]
     if rows:
         body.append(details(f"dam_break_2d.csv: {len(rows)} rows", table(rows)))
+    others = [d / "dam_break_2d.json" for d in page.dirs if (d / "dam_break_2d.json").is_file()][1:]
+    if others:
+        body += ["<h3>Other runs of this case (the other --results folders)</h3>", table([other_run(p) for p in others])]
     page.add("dam_break_2d", "2D dam break after Martin & Moyce (1952)", "\n".join(body))
+
+
+def other_run(path):
+    """A row of the settings and errors of the 2D run summarised in `path`."""
+    summary = json.loads(path.read_text())
+    s = summary.get("settings", {})
+    return {"folder": shown(path.parent), **{k: s.get(k) for k in ("backend", "resolution", "precision",
+                                                                   "equation_of_state", "dt_fraction")},
+            **{k: summary.get(k) for k in ("device", "particles", "steps", "wall_s", "rms_Z_table2",
+                                           "rms_Z_table2_unshifted", "best_shift_T_table2")}}
 
 
 def sweep_section(page):
@@ -354,12 +367,13 @@ def environment(page, argv):
 
 
 def build_report(out, results=None, settings=None, argv=None):
-    """Write DIR/index.html (and its pictures) from the results in `results` and DIR; return its path.
+    """Write DIR/index.html (and its pictures) from the results in `results` (a folder or a list
+    of folders, searched in order) and DIR; return its path.
     `settings` overrides the 2D dam break's defaults where the report has to run it (for tests)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    dirs = [Path(results)] if results else []
-    if not dirs or dirs[0].resolve() != out.resolve():
+    dirs = [Path(results)] if isinstance(results, (str, Path)) else [Path(r) for r in results or ()]
+    if out.resolve() not in [d.resolve() for d in dirs]:
         dirs.append(out)
     page = Page(out, dirs)
     dam_break_2d(page, settings)

@@ -4,14 +4,17 @@ for how much time.
 A point is a settings dict for `dam_break.run_dam_break`, varying the AXES below. The design is
 not the full factorial: a resolution ladder around the defaults, crossed with the equation of
 state, the time step and the viscosity (does the error shrink with resolution, and does that
-depend on the model?), and every other axis one at a time at the default resolution. Points are independent runs, executed through Dask's distributed
-scheduler (a LocalCluster here, or `--scheduler ADDRESS`); each result is written to
-DIR/sweep.csv and DIR/sweep.json as it arrives, so an interrupted sweep keeps what it has, and
-points already there with status "ok" are not run again.
+depend on the model?), and every other axis one at a time at the default resolution. Points
+are independent runs, executed through Dask's distributed scheduler (a LocalCluster here, or
+`--scheduler ADDRESS`: start its workers with OMP_WAIT_POLICY=passive); each result is written
+to DIR/sweep.csv and DIR/sweep.json as it arrives, so an interrupted sweep keeps what it has,
+and points already there with status "ok" are not run again.
 
 Cost is the time spent stepping (run_dam_break's wall_s) after a warm-up run of the same
 compile-time choices in the same worker: numba compiles each specialization once per process
-(about 20 s here), which would otherwise be charged to whichever point came first.
+(10-18 s here), which would otherwise be charged to whichever point came first. The process's
+CPU time (cpu_s) and the machine's load average (load_1min) are recorded beside it: on a
+shared machine they say how far wall_s can be trusted.
 """
 import csv
 import io
@@ -284,7 +287,8 @@ def describe(rec):
             lines.append(f"{axis} ({where}): " + "; ".join(steps) + ".")
     lines += limits(rec["effects"])
     if rec["failed"]:
-        lines.append(f"Failed ({len(rec['failed'])}): " + "; ".join(f"{f['label']}: {f['error']}" for f in rec["failed"]) + ".")
+        lines.append(f"Failed ({len(rec['failed'])}): "
+                     + "; ".join(f"{f['label']}: {f['error']}" for f in rec["failed"]) + ".")
     return lines
 
 
@@ -368,7 +372,8 @@ def plot_pareto(rows, path, threshold=THRESHOLD):
     ax.axhline(threshold, color="r", ls="--", lw=0.8, label=f"RMS = {threshold:g}")
     failed = len(rows) - len(ok)
     ax.set(xscale="log", xlabel="cost: wall time stepping [s] (log)", ylabel="error: RMS of Z against Table 2",
-           title=f"2D dam break: error against cost, {len(ok)} points" + (f" ({failed} failed, not shown)" if failed else ""))
+           title=f"2D dam break: error against cost, {len(ok)} points"
+                 + (f" ({failed} failed, not shown)" if failed else ""))
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
