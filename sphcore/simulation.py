@@ -227,8 +227,8 @@ class Simulation:
             cause = f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s"
         elif not (scene["physics.viscosity"] and scene["fluid.viscosity"] > 0):
             cause = "no viscosity: nothing damps the particles' noise (raise fluid.viscosity)"
-        elif scene["domain.boundary"] == "walls" and gap < scene.h:
-            cause = (f"particle {i} is {gap:.3g} m from a wall, within h = {scene.h:g} m, where its mirror images "
+        elif scene["domain.boundary"] == "walls" and gap < scene["fluid.spacing"] / 2:
+            cause = (f"particle {i} is {gap:.3g} m from a wall, closer than half a spacing, where its mirror images "
                      "(the walls' ghost particles) push it; a particle that starts on a wall is pushed by images "
                      "that coincide with it: start the fluid at least fluid.spacing / 2 inside the box")
         else:

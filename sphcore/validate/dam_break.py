@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from sphcore.output import atomic_write_bytes
-from sphcore.scene import Scene
+from sphcore.scene import Scene, SceneError
 from sphcore.validate import DATA_DIR
 
 G = 9.81
@@ -79,6 +79,8 @@ def dam_break_scene(settings):
     a, dim = s["a"], s["dimension"]
     dx = a / s["resolution"]
     viscosity = s["viscosity"]
+    if not s["stiffness"] > 0:
+        raise SceneError(f"stiffness = {s['stiffness']!r}: must be > 0 (m^2/s^2)")
     if viscosity is None:
         viscosity = s["alpha"] * 1000.0 * math.sqrt(s["stiffness"]) * s["smoothing_ratio"] * dx / (2 * dim + 4)
     lo, hi = [0.0, 0.0], [TANK_LENGTH * a, TANK_HEIGHT * a]
