@@ -59,6 +59,13 @@ def atomic_savez(path, **arrays) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
+def atomic_savefig(fig, path, **options) -> None:
+    """fig.savefig(path) (PNG) with the same all-or-nothing guarantee as atomic_write_bytes."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", **options)
+    atomic_write_bytes(path, buf.getvalue())
+
+
 def _data_array(parent, name, arr):
     """Append a format="binary" DataArray: base64(UInt64 byte count) followed by base64(raw data),
     the two encoded separately, as VTK's own uncompressed writer does."""

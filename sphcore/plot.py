@@ -3,6 +3,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sphcore.output import atomic_savefig
+
 
 def plot_state(npz_path, out=None):
     import json
@@ -23,6 +25,6 @@ def plot_state(npz_path, out=None):
            title=f"{scene['name']}: {len(x)} particles, t = {float(data['time']):.3f} s")
     fig.colorbar(dots, ax=ax, label="speed [m/s]", shrink=0.8)
     out = Path(out or Path(npz_path).with_name("final.png"))
-    fig.savefig(out, bbox_inches="tight")
+    atomic_savefig(fig, out, bbox_inches="tight")
     plt.close(fig)
     return out

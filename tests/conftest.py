@@ -62,3 +62,33 @@ def scene_state(scene, jitter=0.0, seed=0):
 def particles(backend, dim):
     """A backend's per-particle arrays in particle-id order, vectors of `dim` components."""
     return in_particle_order(backend.read(), dim)
+
+
+def schedule_dependent(stage):
+    """Buffers whose contents depend on the order a GPU runs atomics in: the slots of count_cells,
+    and the sorted order scatter_particles writes from them (sort_cells makes it exact again)."""
+    return {"particle_slot", "sorted_index"} if stage.name == "scatter_particles" else {"particle_slot"}
+
+
+def assert_stage_agrees(a, b, stage, rtol):
+    """Two backends' buffers after `stage`: integers bitwise, reals within rtol of each buffer's scale."""
+    for name in a:
+        if name in schedule_dependent(stage):
+            continue
+        if a[name].dtype.kind == "u":
+            assert np.array_equal(a[name], b[name]), f"after {stage}: {name} differs"
+            continue
+        scale = max(float(np.abs(a[name]).max(initial=0.0)), 1e-300)
+        err = float(np.abs(a[name] - b[name]).max(initial=0.0))
+        assert err <= rtol * scale, f"after {stage}: {name} differs by {err:g} (scale {scale:g})"
+
+
+def schema_keys(schema=None, prefix=""):
+    """(dotted name, Key) of every scene key."""
+    from sphcore.scene import SCHEMA
+
+    for name, key in (SCHEMA if schema is None else schema).items():
+        if isinstance(key, dict):
+            yield from schema_keys(key, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", key

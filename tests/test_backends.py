@@ -1,7 +1,7 @@
 """The Vulkan runner against the numba oracle: one dispatch of each shader, and whole scenes."""
 import numpy as np
 import pytest
-from conftest import particles, scene_state
+from conftest import assert_stage_agrees, particles, scene_state
 
 from sphcore.cli import scene_path
 from sphcore.scene import Scene
@@ -15,10 +15,6 @@ STAGE_RTOL = 1e-5
 
 # The atomic slots taken in count_cells (particle_slot) depend on GPU scheduling, and so does
 # sorted_index until sort_cells has ordered every cell's run: those may legitimately differ.
-def schedule_dependent(stage):
-    return {"particle_slot", "sorted_index"} if stage.name == "scatter_particles" else {"particle_slot"}
-
-
 @pytest.mark.parametrize("scene_name", ["dam_break_2d", "cube_drop_2d", "dam_break_3d", "droplet_3d"])
 def test_each_shader_once_agrees(open_backend, scene_name):
     """Integers (cells, counts, pyramid, offsets, sorted order, ids) bitwise; floats within STAGE_RTOL."""
@@ -31,15 +27,7 @@ def test_each_shader_once_agrees(open_backend, scene_name):
         cpu.run_stage(stage)
         gpu.run_stage(stage)
         a, b = cpu.read(), gpu.read()
-        for name in a:
-            if name in schedule_dependent(stage):
-                continue
-            if a[name].dtype.kind == "u":
-                assert np.array_equal(a[name], b[name]), f"after {stage}: {name} differs"
-                continue
-            scale = max(float(np.abs(a[name]).max(initial=0.0)), 1e-30)
-            err = float(np.abs(a[name] - b[name]).max(initial=0.0))
-            assert err <= STAGE_RTOL * scale, f"after {stage}: {name} differs by {err:g} (scale {scale:g})"
+        assert_stage_agrees(a, b, stage, STAGE_RTOL)
 
 
 # 100 steps: rounding differences grow with the flow's sensitivity; over 0.01 s of a dam break

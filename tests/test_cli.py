@@ -6,9 +6,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from conftest import vulkan_or_skip
+from conftest import schema_keys, vulkan_or_skip
 from sphcore.cli import main
-from sphcore.scene import SCHEMA, Scene
+from sphcore.scene import Scene
 
 STEPS = 20
 EVERY = 8  # snapshots at 0, 8, 16 and at the end, 20
@@ -144,14 +144,6 @@ def test_run_shipped_scene_by_name(tmp_path, capsys, monkeypatch):
     assert data["position"].shape == (900, 2)
     assert json.loads(str(data["scene"]))["name"] == "cube_drop_2d"
     assert not (tmp_path / "runs").exists()
-
-
-def schema_keys(schema=SCHEMA, prefix=""):
-    for name, key in schema.items():
-        if isinstance(key, dict):
-            yield from schema_keys(key, f"{prefix}{name}.")
-        else:
-            yield f"{prefix}{name}", key
 
 
 def test_keys_lists_every_key_with_unit(capsys):

@@ -17,6 +17,7 @@ from functools import reduce
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
+from conftest import schema_keys
 from hypothesis import strategies as st
 
 from sphcore.cli import main
@@ -29,14 +30,6 @@ BASE = {
     "fluid": {"spacing": 0.05, "blocks": [{"min": [0.3, 0.4], "max": [0.6, 0.7]}]},
     "time": {"dt": 1e-3, "steps": 3, "output_every": 2, "checkpoint_every": 2},
 }
-
-
-def schema_keys(schema=SCHEMA, prefix=""):
-    for name, key in schema.items():
-        if isinstance(key, dict):
-            yield from schema_keys(key, f"{prefix}{name}.")
-        else:
-            yield f"{prefix}{name}", key
 
 
 KEYS = dict(schema_keys())

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import BACKENDS, particles
+from conftest import BACKENDS, assert_stage_agrees, particles
 
 from sphcore.backends import Stage, empty_state, make_backend, plan
 from sphcore.params import MAX_OBSTACLES
@@ -194,15 +194,7 @@ def test_backends_agree_stage_by_stage_on_a_box(open_backend):
         cpu.run_stage(stage)
         gpu.run_stage(stage)
         a, b = cpu.read(), gpu.read()
-        for name in a:
-            if name == "particle_slot" or (name == "sorted_index" and stage.name == "scatter_particles"):
-                continue  # atomics' slots: scheduling-dependent (tests/test_backends.py)
-            if a[name].dtype.kind == "u":
-                assert np.array_equal(a[name], b[name]), f"after {stage}: {name} differs"
-                continue
-            scale = max(float(np.abs(a[name]).max(initial=0.0)), 1e-30)
-            err = float(np.abs(a[name] - b[name]).max(initial=0.0))
-            assert err <= STAGE_RTOL * scale, f"after {stage}: {name} differs by {err:g} (scale {scale:g})"
+        assert_stage_agrees(a, b, stage, STAGE_RTOL)
     assert not inside(particles(cpu, 3)["particle_x"]).any()
     cpu.step(20)
     gpu.step(20)

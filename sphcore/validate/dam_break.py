@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sphcore.output import atomic_write_bytes
+from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError
 from sphcore.validate import DATA_DIR
 
@@ -250,6 +250,6 @@ def plot(rows, summary, path):
     fig.suptitle(f"{s['dimension']}D dam break, {summary['particles']} particles ({s['resolution']} across a), "
                  f"{s['equation_of_state']} EOS, {s['precision']}, {s['backend']}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
+    atomic_savefig(fig, path)
     plt.close(fig)
     return path

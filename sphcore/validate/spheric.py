@@ -238,7 +238,7 @@ def plot(rows, summary, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sphcore.output import atomic_write_bytes
+    from sphcore.output import atomic_savefig
 
     t_exp, exp = read_experiment()
     t = np.array([r["t"] for r in rows])
@@ -270,8 +270,6 @@ def plot(rows, summary, path):
                  f"{math.sqrt(s['stiffness']):g} m/s, {s['precision']}, {s['backend']} on {summary['device']}, "
                  f"{summary['wall_s']:.0f} s", fontsize=9)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
+    atomic_savefig(fig, path)
     plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
     return path

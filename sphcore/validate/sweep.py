@@ -26,7 +26,7 @@ import socket
 import time
 from pathlib import Path
 
-from sphcore.output import atomic_write_bytes
+from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.simulation import SimulationError
 from sphcore.validate.dam_break import SETTINGS
 
@@ -377,10 +377,8 @@ def plot_pareto(rows, path, threshold=THRESHOLD):
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
+    atomic_savefig(fig, path)
     plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
     return path
 
 
