@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # Set up a Debian/Ubuntu machine for sphcore: Vulkan on the CPU (lavapipe), the validation
 # layers, the GLSL compilers, OpenGL through EGL on the CPU (llvmpipe, for `sphcore render`'s
-# offscreen pictures: no X server needed), and the project with its test extras. Safe to run again.
+# offscreen pictures: no X server needed), and the project with its test extras in .venv, a
+# virtual environment made from the distribution's python3 (PEP 668: Debian 12 and Ubuntu 24.04
+# refuse `pip install` into the system interpreter). Safe to run again: it installs only what
+# is missing.
 set -euo pipefail
 cd "$(dirname "$0")"
 packages=(mesa-vulkan-drivers libvulkan1 vulkan-tools vulkan-validationlayers glslang-tools glslc spirv-tools
-          libegl1 libegl-mesa0 libgl1-mesa-dri)
+          libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -15,4 +18,6 @@ if [ ${#missing[@]} -gt 0 ]; then
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}"
 fi
-python3 -m pip install -q -e ".[test]"
+# a .venv whose interpreter is gone (python3 upgraded or moved) is made anew
+.venv/bin/python -c "" 2>/dev/null || python3 -m venv --clear .venv
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"

@@ -231,7 +231,7 @@ class VulkanBackend:
 
     def __init__(self, params, state, stages, spec, local_size=128, device=None, validation=None,
                  steps_per_submit=64, precision="float32"):
-        from vk_runner import Context
+        from sphcore.vk_runner import Context
         self.dtypes = {name: buffer_dtype(name, precision) for name in BUFFERS}
         self.defines = ("SPHCORE_FLOAT64",) if precision == "float64" else ()
         self.ctx = Context(device=device, validation=validation, float64=precision == "float64")
@@ -251,7 +251,7 @@ class VulkanBackend:
 
     def _pipeline(self, name):
         """The compute pipeline of shader `name`, built on first use with the scene's constants."""
-        from vk_runner import compile_glsl
+        from sphcore.vk_runner import compile_glsl
         if name not in self.pipelines:
             spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp", defines=self.defines)
             pipeline = self.ctx.pipeline(spirv, len(BUFFERS), self.params.dtype.itemsize, self.local_size,

@@ -6,7 +6,7 @@ import signal
 import sys
 from pathlib import Path
 
-SCENE_DIR = Path(__file__).resolve().parent.parent / "scenes"
+from sphcore.paths import SCENE_DIR
 
 
 def scene_path(name):
@@ -128,7 +128,7 @@ def main(argv=None):
 
     from sphcore.scene import SceneError
     from sphcore.simulation import SimulationError
-    from vk_runner import ShaderCompileError, VulkanError
+    from sphcore.vk_runner import ShaderCompileError, VulkanError
 
     try:
         args.func(args)

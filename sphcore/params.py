@@ -8,11 +8,10 @@ both the bytes pushed to Vulkan and the `params` argument of every numba mirror
 import math
 import re
 from collections import namedtuple
-from pathlib import Path
 
 import numpy as np
 
-SHADER_DIR = Path(__file__).resolve().parent.parent / "shaders"
+from sphcore.paths import SHADER_DIR
 
 # GLSL type -> (numpy base type, components, std430 alignment in bytes)
 _GLSL_TYPES = {

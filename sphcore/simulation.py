@@ -302,7 +302,7 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
     from tqdm import tqdm
 
     from sphcore.output import SnapshotSeries, atomic_savez, atomic_write_bytes
-    from vk_runner import VulkanError
+    from sphcore.vk_runner import VulkanError
 
     steps = scene["time.steps"] if steps is None else steps
     out_dir = Path(out_dir or Path("runs") / scene["name"])

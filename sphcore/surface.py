@@ -234,7 +234,7 @@ class VulkanDevice:
     extraction, emit_vertices dispatched indirectly from the arguments the device wrote."""
 
     def __init__(self, extractor, device=None, validation=None):
-        from vk_runner import Context
+        from sphcore.vk_runner import Context
         self.x = extractor
         self.ctx = Context(device=device, validation=validation)
         self.buffers = {name: self._buffer(name) for name in MC_BUFFERS}
@@ -246,7 +246,7 @@ class VulkanDevice:
         return self.ctx.buffer(self.x.length(name) * c * np.dtype(dtype).itemsize, name)
 
     def _pipeline(self, stage):
-        from vk_runner import compile_glsl
+        from sphcore.vk_runner import compile_glsl
         if stage not in self.pipelines:
             spirv = compile_glsl(SHADER_DIR / "mc" / f"{stage}.comp")
             pipeline = self.ctx.pipeline(spirv, len(MC_BUFFERS), MC_PARAMS_DTYPE.itemsize, self.x.local_size,

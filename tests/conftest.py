@@ -14,7 +14,7 @@ BACKENDS = ["numba", "vulkan"]
 
 def vulkan_or_skip():
     """Skip a Vulkan test where no Vulkan device exists, except in CI, where it must exist."""
-    from vk_runner import Context, VulkanError
+    from sphcore.vk_runner import Context, VulkanError
     try:
         Context().close()
     except VulkanError as e:

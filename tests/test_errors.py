@@ -64,8 +64,8 @@ def assert_clean_failure(proc, out_dir, *needles):
 
 
 def skip_unless_compiler():
-    from vk_runner import ShaderCompileError
-    from vk_runner.compiler import find_compiler
+    from sphcore.vk_runner import ShaderCompileError
+    from sphcore.vk_runner.compiler import find_compiler
     try:
         find_compiler()
     except ShaderCompileError as e:
@@ -213,7 +213,7 @@ def test_no_shader_compiler(tmp_path):
 
 def test_shader_compile_error_names_file_and_line(tmp_path, monkeypatch):
     skip_unless_compiler()
-    from vk_runner import ShaderCompileError, compile_glsl
+    from sphcore.vk_runner import ShaderCompileError, compile_glsl
     monkeypatch.setenv("SPHCORE_CACHE_DIR", str(tmp_path / "cache"))
     source = tmp_path / "broken.comp"
     source.write_text("#version 450\n"
@@ -231,7 +231,7 @@ def test_shader_compile_error_names_file_and_line(tmp_path, monkeypatch):
 
 def test_out_of_device_memory_names_buffer():
     vulkan_or_skip()
-    from vk_runner import Context, VulkanError
+    from sphcore.vk_runner import Context, VulkanError
     ctx = Context()
     try:
         with pytest.raises(VulkanError) as info:

@@ -98,7 +98,7 @@ def test_buffer_beyond_the_device_limit(tmp_path, capsys):
     """A few particles in a box of 36 million cells: the neighbour grid's pyramid needs 156 MiB,
     more than lavapipe's largest storage buffer (128 MiB)."""
     vulkan_or_skip()
-    from vk_runner import Context
+    from sphcore.vk_runner import Context
     with Context() as ctx:
         limit, name = ctx.max_storage_buffer_range, ctx.device_name
     cells = 6000 * 6000

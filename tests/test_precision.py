@@ -152,7 +152,7 @@ def test_float64_run_writes_float64(tmp_path, backend):
 def test_float64_on_a_device_without_shader_float64(tmp_path, capsys, monkeypatch):
     """One line that names the feature and both ways out; a float32 scene still runs there."""
     vulkan_or_skip()
-    from vk_runner import Context
+    from sphcore.vk_runner import Context
     monkeypatch.setattr(Context, "_supports_float64", lambda self: False)
     path = tmp_path / "scene.toml"
     path.write_text(scene_path("cube_drop_2d").read_text() + '\n[physics]\nprecision = "float64"\n')

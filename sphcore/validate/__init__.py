@@ -3,6 +3,5 @@ test 2, the speed/accuracy sweep, the stability matrix and the HTML report that 
 
 The measured series live in `validation/data/` (copied, headers and all, from the published
 digitisations named in each header)."""
-from pathlib import Path
 
-DATA_DIR = Path(__file__).resolve().parent.parent.parent / "validation" / "data"
+from sphcore.paths import DATA_DIR  # noqa: F401

@@ -309,7 +309,7 @@ def vulkan_devices():
     try:
         import vulkan as vk
 
-        from vk_runner import Context
+        from sphcore.vk_runner import Context
         ctx = Context()
     except Exception as e:  # noqa: BLE001 - no loader, no driver, no package: said in the report
         return f"no Vulkan device could be opened: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"

@@ -83,7 +83,7 @@ def largest_count(backend="numba", precision="float32", device=None):
     real = 8 if precision == "float64" else 4
     limits = {"the scene limit MAX_PARTICLES": MAX_PARTICLES}
     if backend == "vulkan":
-        from vk_runner import Context
+        from sphcore.vk_runner import Context
 
         ctx = Context(device=device)
         try:

@@ -424,7 +424,7 @@ def connect(scheduler, workers, timeout=10):
 def vulkan_is_cpu(client):
     """Whether the Vulkan device a worker picks is a CPU (lavapipe), or there is none."""
     def probe():
-        from vk_runner import Context, VulkanError
+        from sphcore.vk_runner import Context, VulkanError
         try:
             with Context() as ctx:
                 return ctx.device_type == "CPU"

@@ -5,7 +5,7 @@ holds device-local buffers and compute pipelines, and records many dispatches in
 command buffer. `compile_glsl` builds SPIR-V with glslangValidator or glslc, cached by
 content hash. Every failure a user can meet raises `VulkanError` with the fix in its message.
 """
-from vk_runner.compiler import ShaderCompileError, compile_glsl
-from vk_runner.context import Context, VulkanError
+from sphcore.vk_runner.compiler import ShaderCompileError, compile_glsl
+from sphcore.vk_runner.context import Context, VulkanError
 
 __all__ = ["Context", "VulkanError", "ShaderCompileError", "compile_glsl"]
