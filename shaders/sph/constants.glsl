@@ -13,3 +13,15 @@ layout(constant_id = 8) const bool NEIGHBOUR_STATS = false; // compute_density r
 layout(constant_id = 11) const uint OBSTACLES = 0;       // box obstacles in obstacle_box (domain.obstacles);
                                                          // 0: the obstacle code is compiled out. (9 and 10
                                                          // are the marching-cubes constants, shaders/mc)
+// Engineering WCSPH (issue 12): each model a small helper in an include, chosen here.
+layout(constant_id = 12) const uint KERNEL = 0;           // 0: Mueller et al. 2003 (poly6, spiky, viscosity);
+                                                          // 1: Wendland C2 for values and gradients
+layout(constant_id = 13) const bool CONTINUITY = false;  // density integrated from d rho/dt (else summation)
+layout(constant_id = 14) const uint DENSITY_DIFFUSION = 0; // 0: none, 1: Molteni & Colagrossi 2009,
+                                                          // 2: Fourtakas et al. 2019
+layout(constant_id = 15) const uint VISCOSITY_MODEL = 0;  // 0: laminar (fluid.viscosity), 1: artificial
+                                                          // (Monaghan 1992, coefficient alpha)
+layout(constant_id = 16) const bool NO_SLIP = false;      // wall images reverse the whole velocity (else the
+                                                          // normal component only: free slip)
+layout(constant_id = 17) const bool VERLET = false;       // kick-drift-kick (else symplectic Euler)
+layout(constant_id = 18) const bool ADAPTIVE_DT = false;  // dt reduced on the device every step (time_state)

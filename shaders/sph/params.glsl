@@ -23,4 +23,6 @@ layout(push_constant) uniform Params {
     vec3 box_max;         // walls [m]
     uint levels;          // HistoPyramid levels above the base (the last one holds one node: the total)
     uvec3 grid_dim;       // cells per axis (the hash period per axis in an open domain)
+    // -- density and kernels (issue 12: physics.kernel, physics.density, physics.density_diffusion)
+    // -- forces, walls and time stepping (issue 12: viscosity_model, wall_model, integrator, dt)
 } P;
