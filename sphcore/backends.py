@@ -52,6 +52,8 @@ BUFFERS = {
     "grid_status": (np.uint32, 1, 4),
     "particle_neighbours": (np.uint32, 2, "particles"),
     "obstacle_box": (np.float32, 4, 2 * MAX_OBSTACLES),
+    "particle_drho": (REAL, 1, "particles"),
+    "scratch_rho": (REAL, 1, "particles"),
 }
 # grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
 # [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
