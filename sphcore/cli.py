@@ -6,23 +6,15 @@ import signal
 import sys
 from pathlib import Path
 
-from sphcore.paths import SCENE_DIR
-
-
-def scene_path(name):
-    """A path as given, else a scene shipped in scenes/ (`dam_break_2d` or `dam_break_2d.toml`)."""
-    path = Path(name)
-    if path.exists() or path.suffix == ".toml" and path.parent != Path("."):
-        return path
-    shipped = SCENE_DIR / (path.name if path.suffix else f"{path.name}.toml")
-    return shipped if shipped.exists() else path
+from sphcore.paths import SCENE_DIR  # noqa: F401 (tests and scripts import it from here)
+from sphcore.scene import scene_path
 
 
 def cmd_run(args):
     from sphcore.scene import Scene
     from sphcore.simulation import CheckpointError, load_checkpoint, run
 
-    scene = Scene.load(scene_path(args.scene)) if args.scene else None
+    scene = Scene.load(args.scene) if args.scene else None
     checkpoint = None
     if args.resume:
         out = Path(args.resume)
@@ -44,10 +36,16 @@ def cmd_run(args):
 
 
 def cmd_keys(args):
-    from sphcore.scene import describe_schema
+    from sphcore.scene import SCHEMA, SceneError, describe_schema
 
+    schema, prefix = SCHEMA, ""
+    if args.section:
+        tables = sorted(name for name, key in SCHEMA.items() if isinstance(key, dict))
+        if args.section not in tables:
+            raise SceneError(f"keys: no section {args.section!r} (sections: {', '.join(tables)})")
+        schema, prefix = SCHEMA[args.section], f"{args.section}."
     print(f"{'key':24} {'default':>12}  {'unit':8} {'range':18} meaning")
-    print("\n".join(describe_schema()))
+    print("\n".join(describe_schema(schema, prefix)))
 
 
 def cmd_plot(args):
@@ -80,9 +78,12 @@ def cmd_render(args):
 
 
 def main(argv=None):
+    from sphcore import __version__
+
     parser = argparse.ArgumentParser(prog="sphcore", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"sphcore {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("run", help="run a scene (a .toml file or the name of one in scenes/), or --resume a run")
+    p = sub.add_parser("run", help="run a scene (a .toml file or the name of a shipped one), or --resume a run")
     p.add_argument("scene", nargs="?")
     p.add_argument("--resume", metavar="RUN_DIR",
                    help="continue the run in RUN_DIR from its checkpoint (its scene, backend and folder)")
@@ -95,6 +96,7 @@ def main(argv=None):
     p.add_argument("--validation", action="store_true", help="enable the Vulkan validation layers")
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("keys", help="list every scene key with its default, unit and range")
+    p.add_argument("section", nargs="?", help="only this table's keys (physics, domain, fluid, forces, walls, time)")
     p.set_defaults(func=cmd_keys)
     p = sub.add_parser("plot", help="draw RUN_DIR/final.npz as a PNG")
     p.add_argument("run_dir")

@@ -17,6 +17,21 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from sphcore.params import CELL_PADDING, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
+from sphcore.paths import SCENE_DIR
+
+
+def shipped_scenes():
+    """Names of the scenes that come with sphcore (`sphcore run NAME`, `Scene.load(NAME)`)."""
+    return sorted(p.stem for p in SCENE_DIR.glob("*.toml"))
+
+
+def scene_path(name):
+    """A path as given, else a scene shipped in scenes/ (`dam_break_2d` or `dam_break_2d.toml`)."""
+    path = Path(name)
+    if path.exists() or path.suffix == ".toml" and path.parent != Path("."):
+        return path
+    shipped = SCENE_DIR / (path.name if path.suffix else f"{path.name}.toml")
+    return shipped if shipped.exists() else path
 
 
 def stable_dt(scene, max_speed=0.0):
@@ -189,12 +204,15 @@ def _merge(where, schema, given):
 
 @dataclass
 class Scene:
-    """A validated scene: `config` holds every key, defaults filled in."""
+    """A validated scene: `config` holds every key, defaults filled in; `scene["fluid.spacing"]`
+    reads one. Make one with `Scene.load(path_or_name)` or `Scene.from_dict({...})` (a dict shaped
+    like the TOML file: only what differs from the defaults; `sphcore keys` lists them)."""
     config: dict
     source: str = "<defaults>"
 
     @classmethod
     def from_dict(cls, data, source="<dict>"):
+        """The scene of `data` (nested dicts, as a TOML file parses), checked: SceneError names a bad key."""
         config = _merge("", SCHEMA, data)
         if config["physics"]["dimension"] == 3:  # vectors left at their 2D defaults gain a z component
             for table, name, z in (("domain", "box_min", 0.0), ("domain", "box_max", 1.0), ("forces", "gravity", 0.0)):
@@ -206,10 +224,14 @@ class Scene:
 
     @classmethod
     def load(cls, path):
-        path = Path(path)
+        """The scene in TOML file `path`, or the shipped scene of that name (`Scene.load("dam_break_2d")`)."""
+        given, path = path, scene_path(path)
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark is allowed
         except FileNotFoundError:
+            if Path(given).parent == Path(".") and Path(given).suffix in ("", ".toml"):
+                raise SceneError(f"{given}: no such scene file, and no shipped scene of that name (shipped: "
+                                 f"{', '.join(shipped_scenes())})") from None
             raise SceneError(f"{path}: no such scene file") from None
         except OSError as e:  # a folder, no permission
             raise SceneError(f"{path}: cannot read ({e.strerror})") from None

@@ -44,8 +44,14 @@ CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p
 
 
 class Simulation:
-    """A scene's particles on one backend. `advance(k)` runs k steps; `read()` checks and returns the state;
-    `checkpoint()` and `restore(arrays)` save and put back everything a later step depends on."""
+    """A scene's particles on one backend ("numba", the default, or "vulkan"; backend_options:
+    local_size, and for Vulkan device and validation).
+
+    `step(k)` runs k steps; `read()` checks the state and returns it in particle order as numpy
+    arrays: particle_x, particle_v, particle_a (N, dim), particle_rho, particle_p (N,) and more;
+    `time` and `step_count` say where the run is. `write_snapshot(dir)` writes a VTK snapshot,
+    `surface()` extracts the fluid's surface (3D). `checkpoint()` and `restore(arrays)` save and
+    put back everything a later step depends on. Use it in a `with` block, or call close()."""
 
     _carried = None  # the CARRIED buffers as the last read() saw them
     energy_start = None  # the energy at the first read, the bound for every later one
@@ -239,7 +245,43 @@ class Simulation:
                               f"{speed[i]:.3g} m/s (sound speed {c:.3g} m/s); likely cause: {cause}")
 
     def close(self):
+        """Free the backend's buffers (and the Vulkan device); the simulation cannot step after it."""
         self.backend.close()
+
+    # -- the Python API (sphcore.Simulation): a run step by step, from a script or a notebook
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def step(self, steps=1):
+        """Run `steps` time steps on the backend (no readback: call read() for the state)."""
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+            raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
+        self.advance(int(steps))
+
+    def write_snapshot(self, out_dir, state=None):
+        """Write the current state (read() unless `state` is given) as a VTK snapshot
+        out_dir/<name>_<step>.vtp and list it in out_dir/<name>.pvd (for ParaView); return its path."""
+        from sphcore.output import SnapshotSeries
+
+        state = self.read() if state is None else state
+        if getattr(self, "_series", None) is None or self._series.out_dir != Path(out_dir):
+            self._series = SnapshotSeries(out_dir, self.scene["name"])
+        return self._series.add(self.step_count, self.time, state["particle_x"], {
+            "velocity": state["particle_v"], "density": state["particle_rho"], "pressure": state["particle_p"]})
+
+    def surface(self, spacing=None, level=0.5, backend=None, state=None):
+        """The fluid's surface now (3D scenes): (verts, faces, normals) of the isosurface at `level`
+        of the colour field, sampled every `spacing` (default h / 2), by marching cubes on `backend`
+        (default: the simulation's); see sphcore.surface.particle_surface."""
+        from sphcore.surface import particle_surface
+
+        state = self.read() if state is None else state
+        return particle_surface(self.scene, state["particle_x"], spacing=spacing, level=level,
+                                backend=backend or self.backend.name)
 
 
 def final_arrays(sim, state):

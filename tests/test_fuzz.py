@@ -10,6 +10,7 @@ import copy
 import io
 import json
 import math
+import os
 import re
 from datetime import date, datetime
 from functools import reduce
@@ -323,11 +324,15 @@ def test_random_command_lines(cli_world, data):
     if "--out" not in argv and "--resume" not in argv:
         argv += ["--out", str(cli_world / "out")]  # never runs/ in the working folder
     stdout, stderr = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    os.chdir(cli_world)  # a relative --out ("cube_drop_2d") lands in the test's folder, not the checkout
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
         try:
             code = main(argv)
         except SystemExit as e:  # argparse: usage errors (2) and --help (0)
             code = e.code
+        finally:
+            os.chdir(here)
     err = stderr.getvalue()
     assert "Traceback" not in err
     assert code in (0, 1, 2), (argv, code, err)
