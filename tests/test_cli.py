@@ -185,3 +185,25 @@ def test_plot_of_a_run_without_final_state_says_so(tmp_path, capsys):
     assert main(["plot", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert "final.npz: no such file" in err and "Traceback" not in err
+
+
+def test_keys_of_one_section(capsys):
+    lines = run_cli(capsys, "keys", "time").splitlines()[1:]
+    assert lines and all(line.startswith("time.") for line in lines)
+    assert {line.split()[0] for line in lines} == {k for k in dict(schema_keys()) if k.startswith("time.")}
+    assert main(["keys", "timing"]) == 1
+    assert "no section 'timing' (sections: domain, fluid, forces, physics, time, walls)" in capsys.readouterr().err
+
+
+def test_version(capsys):
+    import sphcore
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out.strip() == f"sphcore {sphcore.__version__}"
+
+
+def test_unknown_scene_name_lists_the_shipped_scenes(capsys):
+    assert main(["run", "dam_brake_2d", "--steps", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "dam_brake_2d: no such scene file, and no shipped scene of that name" in err
+    assert "dam_break_2d, dam_break_3d" in err and len(err.strip().splitlines()) == 1
