@@ -19,6 +19,40 @@ def cmd_dam_break(args):
           f"simulated T + {summary['gate_shift_T']:g}; unshifted {summary['rms_Z_table2_unshifted']:.3f}) -> {png}")
 
 
+def physics_settings(args, keys):
+    """The settings of `keys` given on the command line, with the configuration and its switches."""
+    from sphcore.validate import configs
+
+    names = set(keys) | {"config", *configs.OPTIONS}
+    return {k: v for k, v in vars(args).items() if k in names and v is not None and v is not False}
+
+
+def cmd_dam_break_pressure(args):
+    from sphcore.validate import buchner
+
+    out = Path(args.out)
+    rows, summary = buchner.run_buchner(physics_settings(args, buchner.SETTINGS), out)
+    png = buchner.plot(rows, summary, out / "dam_break_pressure.png")
+    met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in summary["meets"].items())
+    print(f"{summary['particles']} particles, {summary['steps']} steps in {summary['wall_s']:.1f} s; P1 against Buchner "
+          f"2002: impact peak t* {summary['peak_t_star']:.3f} ({100 * summary['peak_time_error']:+.1f} %), p* "
+          f"{summary['peak_p_star']:.3f} ({100 * summary['peak_height_error']:+.0f} %), RMS {summary['rms_p_star']:.3f} "
+          f"({summary['rms_points']} points); targets: {met} -> {png}")
+
+
+def cmd_tank(args):
+    from sphcore.validate import tank
+
+    out = Path(args.out)
+    rows, summary = tank.run_tank(physics_settings(args, tank.SETTINGS), out)
+    png = tank.plot(rows, summary, out / "tank.png")
+    met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in summary["meets"].items())
+    print(f"{summary['particles']} particles, {summary['steps']} steps in {summary['wall_s']:.1f} s; at t = "
+          f"{rows[-1]['t']:.3g} s: slope {100 * summary['slope_error']:+.2f} % of rho g, largest deviation "
+          f"{100 * summary['deviation_max']:.2f} % of rho g D, wall sensors within "
+          f"{100 * summary['sensor_error_max']:.2f} %; targets: {met} -> {png}")
+
+
 def cmd_spheric(args):
     from sphcore.validate import spheric
 
@@ -83,6 +117,23 @@ def positive(kind):
     return parse
 
 
+def add_physics_options(p):
+    """--config and the physics switches of issue 12 (sphcore.validate.configs)."""
+    from sphcore.validate import configs
+
+    p.add_argument("--config", choices=list(configs.CONFIGS), help="named model configuration (default "
+                   f"{configs.DEFAULT_CONFIG}: the scenes' defaults; {configs.RECOMMENDED_CONFIG}: the recommended "
+                   "model); the options below override it")
+    p.add_argument("--kernel", choices=configs.choices("kernel"), help="physics.kernel")
+    p.add_argument("--density", choices=configs.choices("density"), help="physics.density")
+    p.add_argument("--density-diffusion", choices=configs.choices("density_diffusion"), help="physics.density_diffusion")
+    p.add_argument("--delta", type=positive(float), help="fluid.density_diffusion: the diffusion coefficient delta")
+    p.add_argument("--viscosity-model", choices=configs.choices("viscosity_model"), help="physics.viscosity_model")
+    p.add_argument("--wall-model", choices=configs.choices("wall_model"), help="domain.wall_model")
+    p.add_argument("--integrator", choices=configs.choices("integrator"), help="time.integrator")
+    p.add_argument("--adaptive-dt", action="store_true", help='time.dt = "adaptive": the step chosen on the device')
+
+
 def add_commands(sub):
     """Add `validate` (with its cases), `sweep` and `report` to the subparsers `sub` of `sphcore`."""
     from sphcore.validate.dam_break import SETTINGS
@@ -105,7 +156,33 @@ def add_commands(sub):
     d.add_argument("--t-end", type=positive(float), help=f"simulated seconds (default {SETTINGS['t_end']:g})")
     d.add_argument("--depth", type=positive(int), help=f"3D: particles across the channel (default {SETTINGS['depth']})")
     d.add_argument("--smoothing-ratio", type=positive(float), help="h / dx (default 2; seed 2: 2.857)")
+    add_physics_options(d)
     d.set_defaults(func=cmd_dam_break)
+    d = cases.add_parser("dam-break-pressure", help="Zhou et al. 1999 / Buchner 2002: the impact pressure at P1 on the "
+                         "downstream wall against the measured series")
+    d.add_argument("--out", required=True, help="output folder (dam_break_pressure.csv, .json, .png)")
+    d.add_argument("--backend", choices=["numba", "vulkan"], help="(default numba)")
+    d.add_argument("--device", help="Vulkan device: index or part of its name")
+    d.add_argument("--resolution", type=positive(int), help="particles per column height H = 0.6 m (default 40)")
+    d.add_argument("--t-end-star", type=positive(float), help="simulated t sqrt(g/H) (default 7.3, the data's end)")
+    d.add_argument("--precision", choices=["float32", "float64"])
+    d.add_argument("--equation-of-state", choices=["linear", "tait"])
+    d.add_argument("--alpha", type=positive(float), help="viscosity alpha (default 0.02)")
+    d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
+    add_physics_options(d)
+    d.set_defaults(func=cmd_dam_break_pressure)
+    d = cases.add_parser("tank", help="water at rest: the settled pressure against rho g depth")
+    d.add_argument("--out", required=True, help="output folder (tank.csv, .json, .png)")
+    d.add_argument("--backend", choices=["numba", "vulkan"], help="(default numba)")
+    d.add_argument("--device", help="Vulkan device: index or part of its name")
+    d.add_argument("--resolution", type=positive(int), help="particles per depth (0.6 m; default 30)")
+    d.add_argument("--t-end", type=positive(float), help="simulated seconds of settling (default 2)")
+    d.add_argument("--precision", choices=["float32", "float64"])
+    d.add_argument("--equation-of-state", choices=["linear", "tait"])
+    d.add_argument("--alpha", type=positive(float), help="viscosity alpha (default 0.02)")
+    d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
+    add_physics_options(d)
+    d.set_defaults(func=cmd_tank)
     d = cases.add_parser("stability", help="the stability matrix: every parameter at its extremes")
     d.add_argument("--out", required=True, help="output folder (a folder of snapshots per case, stability.json/.csv)")
     d.add_argument("--backend", choices=["numba", "vulkan"], default="numba")

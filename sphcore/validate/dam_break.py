@@ -27,7 +27,7 @@ import numpy as np
 
 from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError
-from sphcore.validate import DATA_DIR
+from sphcore.validate import DATA_DIR, configs
 
 G = 9.81
 TANK_LENGTH = 8.0  # in units of a
@@ -62,6 +62,8 @@ SETTINGS = {  # the validation case's defaults: what `sphcore validate dam-break
     "dt_fraction": 1.0,  # of the stability bound (dt = "auto")
     "neighbour_search": "grid",
     "depth": 4,  # 3D: particles across the channel (free slip walls either side)
+    "config": configs.DEFAULT_CONFIG,  # the model (sphcore.validate.configs); the switches below override it
+    **{option: None for option in configs.OPTIONS},
 }
 
 
@@ -91,7 +93,7 @@ def dam_break_scene(settings):
         lo, hi = lo + [0.0], hi + [max(depth, 2.2 * s["smoothing_ratio"] * dx)]
         block = {"min": [0.0, 0.0, 0.0], "max": [a, 2 * a, depth]}
         gravity = gravity + [0.0]
-    return Scene.from_dict({
+    return Scene.from_dict(configs.apply({
         "name": f"dam_break_{dim}d",
         "physics": {"dimension": dim, "equation_of_state": s["equation_of_state"],
                     "neighbour_search": s["neighbour_search"], "precision": s["precision"]},
@@ -100,7 +102,7 @@ def dam_break_scene(settings):
                   "stiffness": s["stiffness"], "viscosity": viscosity},
         "forces": {"gravity": gravity},
         "time": {"dt": "auto", "dt_fraction": s["dt_fraction"], "steps": 1},
-    }, source="dam break (Martin & Moyce 1952)")
+    }, configs.overrides(s)), source="dam break (Martin & Moyce 1952)")
 
 
 def neighbour_counts(x, candidates, h):
@@ -155,9 +157,12 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
 
     s = {**SETTINGS, **(settings or {})}
     scene = dam_break_scene(s)
-    a, dt = s["a"], scene.dt
+    from sphcore.validate.buchner import dt_estimate
+
+    a, dt = s["a"], dt_estimate(scene)
     every = max(1, round(SAMPLE_DT / math.sqrt(2 * G / a) / dt))
     steps = math.ceil(s["t_end"] / dt)
+    adaptive = scene["time.dt"] == "adaptive"  # the device chooses each step: run to t_end in simulated time
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     sim = Simulation(scene, s["backend"], **options)
     rows, wall, k_min = [], 0.0, min_neighbours(scene)
@@ -168,16 +173,16 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
                 t = sim.time
                 rows.append({"t": t, "front_x": front, "column_height": height, "T": t * math.sqrt(2 * G / a),
                              "Z": front / a, "tau": t * math.sqrt(G / a), "H": height / (2 * a)})
-                if sim.step_count >= steps:
+                if sim.step_count >= steps if not adaptive else t >= s["t_end"] * (1 - 1e-9):
                     break
-                k = min(every, steps - sim.step_count)
+                k = min(every, steps - sim.step_count) if not adaptive else every
                 start = time.perf_counter()
                 sim.advance(k)  # both backends return when the steps are done
                 wall += time.perf_counter() - start
                 bar.update(k)
     finally:
         sim.close()
-    summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": steps, "wall_s": wall,
+    summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": sim.step_count, "wall_s": wall,
                "min_neighbours": k_min, **errors(rows, s)}
     if out_dir is not None:
         out = Path(out_dir)

@@ -1,0 +1,113 @@
+"""Named model configurations of the validation cases (issue 12), and the physics switches a case
+takes one by one.
+
+A configuration is a set of scene keys (dotted names) laid over the scene a validation case
+builds; "graphics" adds none (the model every scene gets by default today: Mueller's kernels,
+summation density, Mueller's laminar viscosity, free-slip mirror walls, symplectic Euler),
+"engineering" is the recommended model for measured figures (Wendland C2, continuity density
+with density diffusion, Monaghan's artificial viscosity, velocity Verlet), the configuration of
+TrixiParticles' 2D dam break (examples/fluid/dam_break_2d.jl: Wendland C2, h = 2 dx, continuity
+density, Molteni-Colagrossi diffusion with delta = 0.1, artificial viscosity alpha = 0.02, linear
+equation of state at c = 20 sqrt(g H)). The other names switch one model at a time from
+"graphics", so the sweep can say which switch buys what.
+
+A configuration whose keys this build's scene schema does not have is refused in one line naming
+them (`require`), so a validation run never silently measures another model than it names.
+"""
+from sphcore.scene import SCHEMA, Key, SceneError
+
+# option name -> (scene key, values allowed where the schema does not say): the switches a
+# validation case takes one by one (`--kernel`, `--density`, ...)
+SWITCHES = {
+    "kernel": ("physics.kernel", ("mueller", "wendland_c2")),
+    "density": ("physics.density", ("summation", "continuity")),
+    "density_diffusion": ("physics.density_diffusion", ("none", "molteni", "fourtakas")),
+    "delta": ("fluid.density_diffusion", None),
+    "viscosity_model": ("physics.viscosity_model", ("laminar", "artificial")),
+    "wall_model": ("domain.wall_model", ("free_slip", "no_slip")),
+    "integrator": ("time.integrator", ("symplectic_euler", "verlet")),
+}
+OPTIONS = (*SWITCHES, "adaptive_dt")  # the settings a case takes beside "config"
+ALPHA_KEY = "fluid.alpha"  # Monaghan's alpha of the artificial viscosity model
+
+ENGINEERING = {"physics.kernel": "wendland_c2", "physics.density": "continuity",
+               "physics.density_diffusion": "molteni", "fluid.density_diffusion": 0.1,
+               "physics.viscosity_model": "artificial", "time.integrator": "verlet"}
+CONFIGS = {
+    "graphics": {},
+    "engineering": ENGINEERING,
+    # one switch at a time from "graphics"
+    "wendland": {"physics.kernel": "wendland_c2"},
+    "continuity": {"physics.density": "continuity", "physics.density_diffusion": "molteni",
+                   "fluid.density_diffusion": 0.1},
+    "artificial": {"physics.viscosity_model": "artificial"},
+    "no_slip": {"domain.wall_model": "no_slip"},
+    "verlet": {"time.integrator": "verlet"},
+    # the recommended model with no-slip walls
+    "engineering_no_slip": {**ENGINEERING, "domain.wall_model": "no_slip"},
+}
+DEFAULT_CONFIG = "graphics"
+RECOMMENDED_CONFIG = "engineering"
+
+
+def schema_key(dotted):
+    """The schema's Key of `dotted`, or None where this build has no such key."""
+    node = SCHEMA
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node if isinstance(node, Key) else None
+
+
+def choices(option):
+    """The values `--<option>` takes: the schema's where it has the key, else the planned ones."""
+    key, planned = SWITCHES[option]
+    found = schema_key(key)
+    if found is not None and "|" in found.kind:
+        return tuple(found.kind.split("|"))
+    return planned
+
+
+def overrides(settings):
+    """The scene keys of settings["config"] with the switches given in `settings` laid over them;
+    {"physics.viscosity_model": "artificial"} brings fluid.alpha = settings["alpha"] with it."""
+    name = settings.get("config") or DEFAULT_CONFIG
+    if name not in CONFIGS:
+        raise SceneError(f"--config {name}: no such configuration (known: {', '.join(CONFIGS)})")
+    out = dict(CONFIGS[name])
+    for option, (key, _) in SWITCHES.items():
+        if settings.get(option) is not None:
+            out[key] = settings[option]
+    if out.get("physics.viscosity_model") == "artificial" and settings.get("alpha") is not None:
+        out[ALPHA_KEY] = settings["alpha"]
+    if settings.get("adaptive_dt"):
+        out["time.dt"] = "adaptive"
+    return out
+
+
+def require(keys, what="the configuration"):
+    """SceneError naming the keys of `keys` this build's scene schema does not have."""
+    missing = sorted(k for k in keys if schema_key(k) is None)
+    if missing:
+        raise SceneError(f"{what} needs scene keys this build does not have: {', '.join(missing)} "
+                         "(`sphcore keys` lists those it has)")
+
+
+def apply(data, keys):
+    """The scene dict `data` (nested, as a TOML file parses) with the dotted `keys` set in it."""
+    require(keys)
+    for dotted, value in keys.items():
+        *tables, name = dotted.split(".")
+        node = data
+        for t in tables:
+            node = node.setdefault(t, {})
+        node[name] = value
+    return data
+
+
+def describe(name_or_keys):
+    """A one-line description of a configuration: its name and keys."""
+    keys = CONFIGS[name_or_keys] if isinstance(name_or_keys, str) else name_or_keys
+    body = ", ".join(f"{k} = {v}" for k, v in keys.items()) or "the scene defaults"
+    return f"{name_or_keys}: {body}" if isinstance(name_or_keys, str) else body
