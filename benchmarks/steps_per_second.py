@@ -80,7 +80,7 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01):
 
 
 def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, min_seconds, device=None,
-              precision="float32"):
+              precision="float32", profile=False):
     from sphcore.backends import empty_state, make_backend, plan
     scene, x = make_case(n, dim, search)
     params = scene.params(n)
@@ -107,6 +107,13 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
                 break
         out = be.read()
         device_name = be.ctx.device_name if backend == "vulkan" else cpu_name()
+        if profile:  # one more chunk, every dispatch timed (Vulkan: GPU timestamps), apart from the timing above
+            from sphcore.profile import Profile, work
+            be.profile = Profile()
+            be.profile.device = device_name
+            be.step(chunk)
+            stage_profile = json.loads(be.profile.to_json(*work(scene, be.read()["particle_x"][:, :dim])))
+            print(be.profile.table(*work(scene, be.read()["particle_x"][:, :dim])), flush=True)
     finally:
         be.close()
     xs = out["particle_x"][:, :dim]
@@ -119,7 +126,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
                          "ms_per_step": 1e3 * seconds / steps, "particle_steps_per_second": n * steps / seconds,
                          "warmup_seconds": warmup, "grid_status": [int(v) for v in out["grid_status"]],
                          "finite": finite, "wall_gap_m_at_end": wall_gap, "h_m": scene.h,
-                         "box_max_m": [float(v) for v in hi]}
+                         "box_max_m": [float(v) for v in hi], "profile": stage_profile if profile else None}
 
 
 def cpu_name():
@@ -172,6 +179,9 @@ def main():
     ap.add_argument("--precision", type=precisions, default=["float32"], help="float32, float64 or both (comma list)")
     ap.add_argument("--device", default=None, help="Vulkan device index or name substring")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--profile", action="store_true",
+                    help="after each timing, one more chunk with every stage timed (Vulkan: GPU timestamps), "
+                         "printed and saved with the roofline note (sphcore.profile)")
     args = ap.parse_args()
     if args.counts is None:
         args.counts = sorted(SEED1_GTX1070_FPS) if args.dim == 2 else COUNTS_3D
@@ -198,7 +208,7 @@ def main():
           f" {'particle-steps/s':>16} {'seed':>12}  device", flush=True)
     for n, precision, ls, spp in itertools.product(args.counts, args.precision, args.local_size, spps):
         device, row = time_case(args.backend, n, args.dim, args.search, ls, spp, min_steps, args.min_seconds,
-                                args.device, precision)
+                                args.device, precision, args.profile)
         record["device"] = device
         record["results"].append(row)
         seed = SEED1_GTX1070_FPS.get(n) if args.dim == 2 else SEED2_MS.get(n)

@@ -215,12 +215,49 @@ class Recording:
                                 vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT,
                                 0, 1, [barrier], 0, None, 0, None)
 
+    def timestamp(self, timer, index):
+        """Write the GPU clock into slot `index` of `timer` (a Timer) once every earlier command
+        has finished (bottom of the pipe): differences of consecutive slots time what ran between."""
+        vk = self.ctx.vk
+        if index == 0:  # a timer's slots are reset by the recording that writes them, before the first
+            vk.vkCmdResetQueryPool(self.command_buffer, timer.pool, 0, timer.slots)
+        vk.vkCmdWriteTimestamp(self.command_buffer, vk.VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timer.pool, index)
+
     def end(self):
         self.ctx.vk.vkEndCommandBuffer(self.command_buffer)
         return self
 
     def free(self):
         self.ctx.vk.vkFreeCommandBuffers(self.ctx.device, self.ctx.command_pool, 1, [self.command_buffer])
+
+
+class Timer:
+    """A pool of `slots` GPU timestamps (Recording.timestamp writes them); `seconds()` reads the
+    intervals between consecutive slots after the recording ran."""
+
+    def __init__(self, ctx, slots):
+        vk = ctx.vk
+        if not ctx.timestamps:
+            raise VulkanError(f"{ctx.device_name} has no timestamps on its compute queue (timestampValidBits = 0 "
+                              "or timestampComputeAndGraphics off): it cannot be profiled per stage")
+        self.ctx, self.slots = ctx, slots
+        self.pool = vk.vkCreateQueryPool(ctx.device, vk.VkQueryPoolCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO, queryType=vk.VK_QUERY_TYPE_TIMESTAMP,
+            queryCount=slots), None)
+
+    def seconds(self, count=None):
+        """The count - 1 intervals between the first `count` slots [s] (as float64)."""
+        vk, count = self.ctx.vk, count or self.slots
+        data = vk.ffi.new("uint64_t[]", count)
+        vk.vkGetQueryPoolResults(self.ctx.device, self.pool, 0, count, 8 * count, data, 8,
+                                 vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT)
+        ticks = np.frombuffer(vk.ffi.buffer(data), np.uint64).astype(np.int64)
+        if self.ctx.timestamp_bits < 64:  # the clock wraps at 2^bits
+            ticks = np.mod(ticks, 1 << self.ctx.timestamp_bits)
+        return np.diff(ticks) * (self.ctx.timestamp_period * 1e-9)
+
+    def free(self):
+        self.ctx.vk.vkDestroyQueryPool(self.ctx.device, self.pool, None)
 
 
 class Context:
@@ -258,6 +295,10 @@ class Context:
         self.memory_properties = vk.vkGetPhysicalDeviceMemoryProperties(self.physical_device)
         families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
         self.queue_family = next(i for i, f in enumerate(families) if f.queueFlags & vk.VK_QUEUE_COMPUTE_BIT)
+        # GPU timestamps (Timer): nanoseconds per tick, and the valid bits of the compute queue's clock
+        self.timestamp_period = float(props.limits.timestampPeriod)
+        self.timestamp_bits = int(families[self.queue_family].timestampValidBits)
+        self.timestamps = bool(self.timestamp_bits and props.limits.timestampComputeAndGraphics)
         queue_info = vk.VkDeviceQueueCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO, queueFamilyIndex=self.queue_family,
             queueCount=1, pQueuePriorities=[1.0])
@@ -420,6 +461,9 @@ class Context:
 
     def record(self):
         return Recording(self)
+
+    def timer(self, slots):
+        return Timer(self, slots)
 
     def submit(self, recording):
         """Run a finished recording and wait for it."""
