@@ -136,3 +136,19 @@ def test_sweep_command_errors_are_one_line(tmp_path, capsys):
     assert main(["sweep", "--out", str(tmp_path), "--quick"]) == 1
     assert "sweep.json: not a sweep table" in capsys.readouterr().err
     assert (tmp_path / "sweep.json").read_text() == "{not json"  # kept as it was
+
+
+def test_recommendations_per_configuration():
+    rows = synthetic((13.0, 0.08, {}), (3.0, 0.12, {"resolution": 16}), (12.0, 0.04, {"config": "engineering"}),
+                     (4.0, 0.09, {"resolution": 16, "config": "engineering"}),
+                     (0.0, math.nan, {"config": "no_slip"}, "failed"))
+    rec = recommendations(rows)
+    per = {c["config"]: c for c in rec["configurations"]}
+    assert set(per) == {"graphics", "engineering", "no_slip"}
+    assert per["engineering"]["most_accurate"]["point"] == 2 and per["engineering"]["cheapest_meeting_threshold"]["point"] == 3
+    assert per["graphics"]["most_accurate"]["point"] == 0 and per["no_slip"]["ok"] == 0
+    assert sorted(per["engineering"]["on_pareto_front"]) == [2, 3] and per["graphics"]["on_pareto_front"] == [1]
+    text = "\n".join(rec["text"])
+    assert "Configuration engineering: 2 of 2 points ran; most accurate engineering (RMS 0.040, 12.00 s)" in text
+    assert "Configuration no_slip: 0 of 1 points ran" in text
+    assert sweep.point_key({k: v for k, v in at().items() if k != "config"}) == sweep.point_key(at())  # older tables

@@ -224,9 +224,20 @@ def run_buchner(settings=None, out_dir=None, progress=True):
     if out_dir is not None:
         write_results(rows, summary, out_dir)
     if info["error"]:
-        kept = f"; the samples to t* = {rows[-1]['t_star']:.4g} are in {out_dir}" if out_dir is not None else ""
+        kept = ""
+        if out_dir is not None:
+            plot(rows, summary, Path(out_dir) / "dam_break_pressure.png")
+            kept = f"; the samples to t* = {rows[-1]['t_star']:.4g} and their plot are in {out_dir}"
         raise SimulationError(info["error"] + kept)
     return rows, summary
+
+
+def read_results(out_dir, name="dam_break_pressure"):
+    """(rows, summary) as write_results wrote them."""
+    out = Path(out_dir)
+    with (out / f"{name}.csv").open(encoding="utf-8") as f:
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    return rows, json.loads((out / f"{name}.json").read_text(encoding="utf-8"))
 
 
 def clean(value):

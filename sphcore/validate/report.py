@@ -33,7 +33,7 @@ OTHER_SECTIONS = {
 }
 PACKAGES = ("numpy", "numba", "vulkan", "matplotlib", "dask", "distributed", "tqdm")
 SWEEP_COLUMNS = ("point", "varied", "backend", "resolution", "dt_fraction", "precision", "equation_of_state", "stiffness",
-                 "neighbour_search", "alpha", "t_end", "status", "dtype", "device", "particles", "steps", "dt", "wall_s",
+                 "neighbour_search", "alpha", "config", "t_end", "status", "dtype", "device", "particles", "steps", "dt", "wall_s",
                  "steps_per_s", "rms_Z_table2", "rms_Z_table2_unshifted", "best_shift_T_table2", "error")
 STYLE = """body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
 table{border-collapse:collapse;font-size:13px;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}

@@ -28,10 +28,11 @@ from pathlib import Path
 
 from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.simulation import SimulationError
+from sphcore.validate.configs import CONFIGS, RECOMMENDED_CONFIG
 from sphcore.validate.dam_break import SETTINGS
 
 AXES = ("backend", "resolution", "dt_fraction", "precision", "equation_of_state", "stiffness",
-        "neighbour_search", "alpha")
+        "neighbour_search", "alpha", "config")
 POINT_KEYS = AXES + ("t_end",)
 DEFAULT = {k: SETTINGS[k] for k in POINT_KEYS}
 THRESHOLD = 0.15  # RMS of Z against Martin & Moyce's Table 2 that a setting must meet (issue 5)
@@ -69,7 +70,7 @@ def design(quick=False, backends=("numba",), vulkan_on_cpu=True):
         points = [quick_at(resolution=10), quick_at()]
         points += [quick_at(**change) for change in (
             {"equation_of_state": "tait"}, {"dt_fraction": 0.5}, {"stiffness": 400.0}, {"alpha": 0.05},
-            {"precision": "float64"}, {"neighbour_search": "all_pairs"})]
+            {"precision": "float64"}, {"neighbour_search": "all_pairs"}, {"config": RECOMMENDED_CONFIG})]
         small = [quick_at(backend="vulkan"), quick_at(backend="vulkan", precision="float64")]
         return [p for p in points if "numba" in backends] + (small if "vulkan" in backends else [])
     ladder = (10, 16, 25, 40, 56)
@@ -81,6 +82,10 @@ def design(quick=False, backends=("numba",), vulkan_on_cpu=True):
     points += [at(dt_fraction=f) for f in (0.25, 2.0, 4.0)] + [at(precision="float64"), at(alpha=4 * viscous)]
     points += [at(equation_of_state=eos, stiffness=k) for eos in ("linear", "tait") for k in (225.0, 3600.0)]
     points += [at(resolution=r, neighbour_search="all_pairs") for r in (16, 25)]
+    # the model (issue 12): every named configuration at the default resolution, the recommended
+    # one along the resolution ladder
+    points += [at(config=name) for name in CONFIGS if name != DEFAULT["config"]]
+    points += [at(resolution=r, config=RECOMMENDED_CONFIG) for r in ladder if r != DEFAULT["resolution"]]
     out = [p for p in points if "numba" in backends]
     if "vulkan" in backends:
         small = [at(resolution=r) for r in (10, 16, 25)] + [
@@ -98,7 +103,7 @@ def varied(point):
 def label(row):
     """A short name of a point: its values that differ from DEFAULT."""
     short = {"resolution": "res", "dt_fraction": "dt x", "equation_of_state": "", "stiffness": "k",
-             "neighbour_search": "", "precision": "", "backend": "", "alpha": "alpha", "t_end": "t_end"}
+             "neighbour_search": "", "precision": "", "backend": "", "alpha": "alpha", "t_end": "t_end", "config": ""}
     parts = [f"{short[k]} {row[k]:g}".strip() if isinstance(row[k], (int, float)) else str(row[k])
              for k in POINT_KEYS if row[k] != DEFAULT[k]]
     return ", ".join(parts) or "default"
@@ -115,7 +120,7 @@ def warm_up(point):
     from sphcore.simulation import Simulation
     from sphcore.validate.dam_break import dam_break_scene
 
-    key = (point["backend"], point["precision"], point["equation_of_state"], point["neighbour_search"])
+    key = (point["backend"], point["precision"], point["equation_of_state"], point["neighbour_search"], point["config"])
     if key not in _WARM:
         start = time.perf_counter()
         sim = Simulation(dam_break_scene({**point, "resolution": 6}), point["backend"])
@@ -161,7 +166,7 @@ def run_point(point):
 # ---- the table ----
 
 def point_key(row):
-    return json.dumps({k: row[k] for k in POINT_KEYS}, sort_keys=True)
+    return json.dumps({k: row.get(k, DEFAULT[k]) for k in POINT_KEYS}, sort_keys=True)
 
 
 def finite(value):
@@ -203,7 +208,7 @@ def read_table(out):
     try:
         data = json.loads(path.read_text())
         rows, meta = data["rows"], data["sweep"]
-        rows = [{k: (math.nan if v is None else v) for k, v in r.items()} for r in rows]
+        rows = [{**DEFAULT, **{k: (math.nan if v is None else v) for k, v in r.items()}} for r in rows]
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise SweepError(f"{path}: not a sweep table ({type(e).__name__}: {e}); move it away or choose another "
                          "--out") from None
@@ -255,9 +260,27 @@ def recommendations(rows, threshold=THRESHOLD):
            "pareto_front": [pick(r) for r in pareto_front(rows)],
            "failed": [{"point": r["point"], "label": label(r), "error": r.get("error", "")}
                       for r in rows if r.get("status") != "ok"],
-           "effects": {axis: effects(rows, axis) for axis in AXES}}
+           "effects": {axis: effects(rows, axis) for axis in AXES},
+           "configurations": by_configuration(rows, threshold, pick)}
     rec["text"] = describe(rec)
     return rec
+
+
+def by_configuration(rows, threshold, pick):
+    """Per named configuration (the model, issue 12): its points, the most accurate, the cheapest
+    with RMS <= threshold, and its points on the Pareto front."""
+    front = {r["point"] for r in pareto_front(rows)}
+    out = []
+    for name in dict.fromkeys(r.get("config", DEFAULT["config"]) for r in rows):
+        mine = [r for r in rows if r.get("config", DEFAULT["config"]) == name]
+        ok = ok_rows(mine)
+        meeting = [r for r in ok if r[ERROR] <= threshold]
+        out.append({"config": name, "points": len(mine), "ok": len(ok),
+                    "most_accurate": pick(min(ok, key=lambda r: (r[ERROR], r[COST]), default=None)),
+                    "cheapest_meeting_threshold": pick(min(meeting, key=lambda r: (r[COST], r[ERROR]), default=None)),
+                    "on_pareto_front": [r["point"] for r in ok if r["point"] in front],
+                    "failed": sorted({r.get("error", "") for r in mine if r.get("status") != "ok"})})
+    return out
 
 
 def _value(v):
@@ -285,6 +308,15 @@ def describe(rec):
             steps = [f"{_value(v[axis])}: " + (f"{v[ERROR]:.3f} in {v[COST]:.2f} s" if v["status"] == "ok"
                                                   else f"failed ({v['error'].split(':')[0]})") for v in g["values"]]
             lines.append(f"{axis} ({where}): " + "; ".join(steps) + ".")
+    for c in rec.get("configurations", []):
+        best, cheap = c["most_accurate"], c["cheapest_meeting_threshold"]
+        text = (f"Configuration {c['config']}: {c['ok']} of {c['points']} points ran"
+                + (f"; most accurate {best['label']} (RMS {best[ERROR]:.3f}, {best[COST]:.2f} s)" if best else "")
+                + (f"; cheapest with RMS <= {rec['threshold']:g} {cheap['label']} ({cheap[ERROR]:.3f}, "
+                   f"{cheap[COST]:.2f} s)" if cheap else "")
+                + f"; {len(c['on_pareto_front'])} on the Pareto front"
+                + (f"; failed: {'; '.join(c['failed'])}" if c["failed"] else "") + ".")
+        lines.append(text)
     lines += limits(rec["effects"])
     if rec["failed"]:
         lines.append(f"Failed ({len(rec['failed'])}): "
