@@ -151,3 +151,25 @@ def test_tiny_buchner_run_on_numba(tmp_path):
     assert summary["rms_points"] > 10 and math.isfinite(summary["rms_p_star"])
     assert set(summary["meets"]) == {"peak_time", "peak_height", "rms"}
     assert (out / "dam_break_pressure.png").stat().st_size > 10_000
+
+
+def test_report_shows_each_configurations_figures(tmp_path):
+    from sphcore.validate import report
+
+    results = tmp_path / "results"
+    for config, rms, res in (("graphics", 1.2345, 30), ("engineering", 0.0876, 60)):
+        folder = results / "model" / f"buchner_{config}_{res}"
+        folder.mkdir(parents=True)
+        summary = {"settings": {**buchner.SETTINGS, "config": config, "resolution": res}, "particles": 2 * res * res,
+                   "peak_p_star": 0.7, "peak_time_error": 0.01, "peak_height_error": -0.05, "rms_p_star": rms,
+                   "wall_s": 12.5, "error": None}
+        (folder / "dam_break_pressure.json").write_text(json.dumps(summary))
+    (results / "tank.json").write_text(json.dumps({"settings": {**tank.SETTINGS, "config": "engineering"},
+                                                   "slope_error": 0.0123, "deviation_max": 0.0456}))
+    (results / "dam_break_2d.json").write_text(json.dumps({"settings": {"resolution": 20}, "rms_Z_table2": 0.0501}))
+    page = report.build_report(tmp_path / "out", results=results).read_text()
+    model = page[page.index('id="model"'):page.index('id="dam_break_3d"')]
+    for text in ("Buchner 2002, P1 pressure", "1.234", "0.0876", "Hydrostatic tank", "1.23", "4.56", "0.0501",
+                 "wendland_c2"):
+        assert text in model, text
+    assert model.index("1.234") < model.index("0.0876")  # today's model first, then the recommended

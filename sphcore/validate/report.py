@@ -252,6 +252,98 @@ def sweep_section(page):
     page.add("sweep", "Speed and accuracy: the sweep", "\n".join(body))
 
 
+def summaries(page):
+    """Every run summary (a JSON dict with "settings") in the results folders and their subfolders,
+    each file once: [(path, summary)]."""
+    seen, out = set(), []
+    for d in page.dirs:
+        if not d.is_dir():
+            continue
+        for path in sorted(d.rglob("*.json")):
+            key = path.resolve()
+            if key in seen or len(path.relative_to(d).parts) > 4:
+                continue
+            seen.add(key)
+            try:
+                data = json.loads(path.read_text())
+            except (OSError, ValueError):
+                continue
+            if isinstance(data, dict) and isinstance(data.get("settings"), dict):
+                out.append((path, data))
+    return out
+
+
+MODEL_CASES = {  # case -> (what identifies its summary, its figures: (column, key, scale))
+    "Martin & Moyce 1952 (front Z)": ("rms_Z_table2", [("RMS of Z vs Table 2", "rms_Z_table2", 1),
+                                                       ("unshifted", "rms_Z_table2_unshifted", 1),
+                                                       ("best shift", "best_shift_T_table2", 1)]),
+    "Buchner 2002, P1 pressure": ("peak_p_star", [("peak t* error %", "peak_time_error", 100),
+                                                 ("peak p* error %", "peak_height_error", 100),
+                                                 ("RMS of p*", "rms_p_star", 1),
+                                                 ("peak p* error % (running mean)", "peak_height_error_smoothed", 100),
+                                                 ("RMS of p* (running mean)", "rms_p_star_smoothed", 1)]),
+    "Hydrostatic tank": ("slope_error", [("slope error %", "slope_error", 100),
+                                         ("largest deviation % of rho g D", "deviation_max", 100),
+                                         ("wall sensors: largest error %", "sensor_error_max", 100)]),
+    "SPHERIC test 2": ("rms_H1", [("RMS H1 m", "rms_H1", 1), ("RMS H2 m", "rms_H2", 1), ("RMS H3 m", "rms_H3", 1),
+                                  ("RMS H4 m", "rms_H4", 1), ("RMS P1 kPa", "rms_P1", 1e-3)]),
+}
+
+
+def model_section(page):
+    """Issue 12: the measured figures of every run found, by case, configuration and resolution:
+    today's model ("graphics", the scenes' defaults) beside the recommended one ("engineering")."""
+    from sphcore.validate.configs import CONFIGS, DEFAULT_CONFIG, RECOMMENDED_CONFIG, describe
+
+    runs = summaries(page)
+    body = [f"<p>Configurations: <b>{esc(describe(DEFAULT_CONFIG))}</b> (today's default); "
+            f"<b>{esc(describe(RECOMMENDED_CONFIG))}</b> (recommended). Every run summary found under the results "
+            "folders, at any resolution and on any backend; a run that stopped early says so in the last column "
+            "(its figures cover the time it ran).</p>"]
+    found = False
+    for case, (marker, figures) in MODEL_CASES.items():
+        rows = []
+        for path, summary in runs:
+            if marker not in summary:
+                continue
+            s = summary["settings"]
+            config = s.get("config") or DEFAULT_CONFIG
+            resolution = s.get("resolution", s.get("spacing"))
+            row = {"configuration": config, "dim": s.get("dimension", 3 if "rms_H1" in summary else 2),
+                   "resolution": resolution, "backend": s.get("backend"),
+                   "device": summary.get("device"), "particles": summary.get("particles"),
+                   "dt fraction": s.get("dt_fraction")}
+            for column, key, scale in figures:
+                value = summary.get(key)
+                row[column] = value * scale if isinstance(value, (int, float)) else None
+            row["wall s"] = summary.get("wall_s")
+            row["stopped"] = (summary.get("error") or "").split(";")[0][:90] or ""
+            row["file"] = shown(path)
+            rows.append(row)
+        if not rows:
+            continue
+        found = True
+        order = {name: i for i, name in enumerate(CONFIGS)}
+        rows.sort(key=lambda r: (order.get(r["configuration"], 99), str(r["backend"]), r["resolution"] or 0))
+        body += [f"<h3>{esc(case)}</h3>", table(rows)]
+        pictures = []
+        for r in rows:
+            png = Path(r["file"]).with_suffix(".png")
+            if png.is_file() and case != "Martin & Moyce 1952 (front Z)":
+                target = page.out / f"{png.parent.name}_{png.name}"
+                if png.resolve() != target.resolve():
+                    shutil.copyfile(png, target)
+                pictures.append(f'<p>{esc(r["configuration"])}, resolution {esc(r["resolution"])}, {esc(r["backend"])}:'
+                                f'</p><p><img src="{esc(target.name)}" alt="{esc(png.name)}"></p>')
+        if pictures:
+            body.append(details(f"{len(pictures)} pictures", "\n".join(pictures)))
+    if not found:
+        body.append(page.missing("sphcore validate dam-break-pressure --out {dir} [--config engineering]"))
+    body.append("<p>Martin &amp; Moyce's residual column H is not compared: no measured H series is carried in "
+                "validation/data (the front Z is).</p>")
+    page.add("model", "The model: today's against the recommended (issue 12)", "\n".join(body))
+
+
 def other_sections(page):
     for prefix, (title, command) in OTHER_SECTIONS.items():
         parts = page.files(prefix)
@@ -378,6 +470,7 @@ def build_report(out, results=None, settings=None, argv=None):
     page = Page(out, dirs)
     dam_break_2d(page, settings)
     sweep_section(page)
+    model_section(page)
     other_sections(page)
     environment(page, argv or " ".join(["sphcore", *sys.argv[1:]]))
     head = ("<p>Generated by <code>sphcore report</code>: every number and picture on this page comes from the "
