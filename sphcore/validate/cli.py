@@ -56,8 +56,7 @@ def cmd_tank(args):
 def cmd_spheric(args):
     from sphcore.validate import spheric
 
-    settings = {k: v for k, v in vars(args).items()
-                if k in ("backend", "device", "spacing", "t_end", "dt_fraction") and v is not None}
+    settings = physics_settings(args, ("backend", "device", "spacing", "t_end", "dt_fraction"))
     rows, summary = spheric.run_spheric(settings, args.out)
     png = spheric.plot(rows, summary, Path(args.out) / "spheric_test2.png")
     rms = ", ".join(f"{g} {summary[f'rms_{g}']:.3f}" for g in spheric.GAUGES)
@@ -110,7 +109,7 @@ def cmd_stability(args):
 def positive(kind):
     def parse(text):
         value = kind(text)
-        if not value > 0:
+        if not 0 < value < float("inf"):  # inf, nan: no run ends
             raise ValueError
         return value
     parse.__name__ = f"positive {kind.__name__}"
@@ -198,6 +197,7 @@ def add_commands(sub):
     s.add_argument("--spacing", type=positive(float), help="particle spacing dx in m (default 0.02: 85,400 particles)")
     s.add_argument("--t-end", type=positive(float), help="simulated seconds (default 6)")
     s.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 0.5)")
+    add_physics_options(s)
     s.set_defaults(func=cmd_spheric)
 
     p = sub.add_parser("sweep", help="speed/accuracy sweep of the 2D dam break through Dask: table, Pareto front, "

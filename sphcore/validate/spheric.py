@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from sphcore.scene import Scene
-from sphcore.validate import DATA_DIR
+from sphcore.validate import DATA_DIR, configs
 
 G = 9.81
 TANK = (3.22, 1.0, 1.0)  # x along, y up, z across
@@ -86,6 +86,8 @@ SETTINGS = {  # what `sphcore validate spheric` runs
     "alpha": 0.02,  # viscosity mu = alpha rho_0 c h / (2 dim + 4)
     "smoothing_ratio": 2.0,
     "dt_fraction": 0.5,  # of the stability bound (dt = "auto"): the whole bound blew up (module docstring)
+    "config": configs.DEFAULT_CONFIG,  # the model (sphcore.validate.configs); the switches below override it
+    **{option: None for option in configs.OPTIONS},
 }
 
 
@@ -97,7 +99,7 @@ def spheric_scene(settings=None):
     n = [max(1, round(w / dx)) for w in WATER]
     h = s["smoothing_ratio"] * dx
     viscosity = s["alpha"] * 1000.0 * math.sqrt(s["stiffness"]) * h / 10.0
-    return Scene.from_dict({
+    return Scene.from_dict(configs.apply({
         "name": "spheric_test2",
         "physics": {"dimension": 3, "equation_of_state": "tait", "precision": s["precision"]},
         "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": list(TANK),
@@ -107,7 +109,7 @@ def spheric_scene(settings=None):
                   "viscosity": viscosity},
         "forces": {"gravity": [0.0, -G, 0.0]},
         "time": {"dt": "auto", "dt_fraction": s["dt_fraction"], "steps": 1},
-    }, source="SPHERIC test 2 (Kleefsman et al. 2005)")
+    }, configs.overrides(s)), source="SPHERIC test 2 (Kleefsman et al. 2005)")
 
 
 def water_heights(x, dx, h):
@@ -173,9 +175,12 @@ def run_spheric(settings=None, out_dir=None, progress=True):
 
     s = {**SETTINGS, **(settings or {})}
     scene = spheric_scene(s)
-    dt, dx, h = scene.dt, scene["fluid.spacing"], scene.h
+    from sphcore.validate.buchner import dt_estimate
+
+    dt, dx, h = dt_estimate(scene), scene["fluid.spacing"], scene.h
     every = max(1, round(SAMPLE_DT / dt))
     steps = math.ceil(s["t_end"] / dt)
+    adaptive = scene["time.dt"] == "adaptive"  # the device chooses each step: run to t_end in simulated time
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     start = time.perf_counter()
     sim = Simulation(scene, s["backend"], **options)
@@ -186,9 +191,9 @@ def run_spheric(settings=None, out_dir=None, progress=True):
                 state = sim.read()
                 x, p = state["particle_x"].astype(np.float64), state["particle_p"].astype(np.float64)
                 rows.append({"t": sim.time, **water_heights(x, dx, h), **pressures(x, p, h)})
-                if sim.step_count >= steps:
+                if sim.step_count >= steps if not adaptive else sim.time >= s["t_end"] * (1 - 1e-9):
                     break
-                k = min(every, steps - sim.step_count)
+                k = min(every, steps - sim.step_count) if not adaptive else every
                 tick = time.perf_counter()
                 sim.advance(k)
                 wall += time.perf_counter() - tick
@@ -198,7 +203,8 @@ def run_spheric(settings=None, out_dir=None, progress=True):
     finally:
         device = sim.device_name
         sim.close()
-    summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": steps, "h": h, "viscosity": scene["fluid.viscosity"],
+    summary = {"settings": s, "configuration": configs.overrides(s), "particles": sim.n, "dt": dt,
+               "steps": sim.step_count, "h": h, "viscosity": scene["fluid.viscosity"],
                "wall_s": wall, "total_s": time.perf_counter() - start, "device": device, "error": error,
                "gauges_x": GAUGES, "sensors": SENSORS, **errors(rows)}
     if out_dir is not None:
