@@ -203,6 +203,14 @@ class NumbaBackend:
         self._launch = [(STAGES[s.name][0](spec, self.real), group_count(dispatch_size(s, params), local_size),
                          stage_params(params, s), [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
 
+    def warm_up(self, after_each=None):
+        """Compile every stage of the plan without running it (a launch of no work groups: numba
+        compiles a mirror on its first call), calling `after_each()` after each."""
+        for launch, _, params, buffers in self._launch:
+            launch(0, self.local_size, params, *buffers)
+            if after_each is not None:
+                after_each()
+
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
         launch = STAGES[stage.name][0](self.spec, self.real)
@@ -232,11 +240,15 @@ class VulkanBackend:
     name = "vulkan"
 
     def __init__(self, params, state, stages, spec, local_size=128, device=None, validation=None,
-                 steps_per_submit=64, precision="float32"):
+                 steps_per_submit=64, precision="float32", before_allocating=None):
+        """`before_allocating(ctx)`: called once the device is chosen, before any buffer is made
+        (sphcore.Simulation checks there that lavapipe's buffers fit in host memory)."""
         from sphcore.vk_runner import Context
         self.dtypes = {name: buffer_dtype(name, precision) for name in BUFFERS}
         self.defines = ("SPHCORE_FLOAT64",) if precision == "float64" else ()
         self.ctx = Context(device=device, validation=validation, float64=precision == "float64")
+        if before_allocating is not None:
+            before_allocating(self.ctx)
         self.params, self.stages, self.steps_per_submit, self.precision = params, stages, steps_per_submit, precision
         self.shapes = {}
         self.buffers = {}

@@ -1,6 +1,8 @@
 """Command line: `sphcore run SCENE`, `sphcore run --resume RUN_DIR`, `sphcore keys`, `sphcore plot RUN_DIR`,
 `sphcore render RUN_DIR`."""
 import argparse
+import math
+import zipfile
 import os
 import signal
 import sys
@@ -29,7 +31,8 @@ def cmd_run(args):
     options = {"local_size": args.local_size}
     if backend == "vulkan":
         options.update(device=args.device, validation=args.validation or None)
-    arrays = run(scene, backend, steps=args.steps, out_dir=out, checkpoint=checkpoint, **options)
+    arrays = run(scene, backend, steps=args.steps, out_dir=out, checkpoint=checkpoint, overwrite=args.overwrite,
+                 **options)
     resumed = f" (resumed at step {int(checkpoint['step'])})" if checkpoint is not None else ""
     print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed}, "
           f"t = {float(arrays['time']):.4g} s -> {out}/final.npz, {out}/{scene['name']}.pvd")
@@ -56,7 +59,10 @@ def cmd_plot(args):
     if not final.is_file():
         raise SceneError(f"{final}: no such file; `sphcore run` writes it when a run completes "
                          "(a run that stopped early keeps its snapshots, *.vtp)")
-    out = plot_state(final, args.out)
+    try:
+        out = plot_state(final, args.out)
+    except (OSError, ValueError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as e:  # truncated, objects
+        raise SceneError(f"{final}: not a readable final state ({str(e)[:200]})") from None
     print(f"wrote {out}")
 
 
@@ -94,6 +100,8 @@ def main(argv=None):
     p.add_argument("--local-size", type=int, default=128, help="work-group size (specialization constant)")
     p.add_argument("--device", help="Vulkan device: index or part of its name (default: a discrete GPU, else any)")
     p.add_argument("--validation", action="store_true", help="enable the Vulkan validation layers")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the run already in --out (its checkpoint, snapshots and final state are deleted)")
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("keys", help="list every scene key with its default, unit and range")
     p.add_argument("section", nargs="?", help="only this table's keys (physics, domain, fluid, forces, walls, time)")
@@ -127,6 +135,10 @@ def main(argv=None):
         parser.error(f"--every must be >= 1, got {args.every}")
     if getattr(args, "spacing", None) is not None and not args.spacing > 0:
         parser.error(f"--spacing must be > 0, got {args.spacing}")
+    if getattr(args, "level", None) is not None and not math.isfinite(args.level):
+        parser.error(f"--level must be a finite number, got {args.level}")
+    if getattr(args, "resume", None) and getattr(args, "overwrite", False):
+        parser.error("--overwrite cannot be combined with --resume: a resume continues the run in RUN_DIR")
 
     from sphcore.scene import SceneError
     from sphcore.simulation import SimulationError
@@ -142,6 +154,10 @@ def main(argv=None):
         return 0
     except OSError as e:  # a folder that is a file, a full disk, no permission: files already written are kept
         print(f"sphcore: error: {e.filename + ': ' if e.filename else ''}{e.strerror or e}", file=sys.stderr)
+        return 1
+    except MemoryError as e:  # past the estimate of sphcore.memory: files already written are kept
+        print(f"sphcore: error: out of memory ({str(e) or 'MemoryError'}); files written so far are complete",
+              file=sys.stderr)
         return 1
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (sphcore.simulation.Interrupted)
         print(f"sphcore: {str(e) or 'interrupted; files written so far are complete'}", file=sys.stderr)

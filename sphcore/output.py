@@ -1,6 +1,7 @@
 """Crash-safe output: atomic file writes, .npz checkpoints, VTK .vtp particle snapshots and
 the ParaView .pvd collection that ties the snapshots of one run into a time series."""
 import base64
+import contextlib
 import io
 import os
 import re
@@ -19,16 +20,17 @@ _VTK_TYPES = {
 }
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
-    """Write `data` to `path` so that `path` holds either its old content or all of `data`.
-
-    The bytes go to a temporary file in the same folder (os.replace is only atomic within one
-    file system), are flushed to disk, and the temporary file is then renamed over `path`."""
+@contextlib.contextmanager
+def atomic_file(path):
+    """An open binary file whose content replaces `path` all at once when the block ends without
+    an error: written under a temporary name in the same folder (os.replace is only atomic within
+    one file system), flushed to disk, then renamed over `path`. On an error (or a signal) the
+    temporary file is removed and `path` keeps its old content."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with open(tmp, "wb") as f:
-            f.write(data)
+            yield f
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -47,16 +49,23 @@ def atomic_write_bytes(path, data: bytes) -> None:
             pass
 
 
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Write `data` to `path` so that `path` holds either its old content or all of `data` (atomic_file)."""
+    with atomic_file(path) as f:
+        f.write(data)
+
+
 def atomic_savez(path, **arrays) -> None:
     """np.savez(path, **arrays) with the same all-or-nothing guarantee as atomic_write_bytes.
     `path` is used as given (np.savez would append '.npz' to a bare name; we don't).
 
-    The same arrays give the same bytes (zipfile dates every member 1980-01-01), so two runs'
-    files can be compared with `cmp`; except record arrays with padding, which numpy's writer
-    leaves uninitialised: store those as bytes (`a.view(np.uint8)`)."""
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(path, buf.getvalue())
+    The members are streamed into the temporary file (numpy writes an array in chunks of 16 MiB),
+    so no second copy of the state is made in memory. The same arrays give the same bytes
+    (zipfile dates every member 1980-01-01), so two runs' files can be compared with `cmp`;
+    except record arrays with padding, which numpy's writer leaves uninitialised: store those
+    as bytes (`a.view(np.uint8)`)."""
+    with atomic_file(path) as f:
+        np.savez(f, **arrays)
 
 
 def atomic_savefig(fig, path, **options) -> None:
@@ -66,24 +75,33 @@ def atomic_savefig(fig, path, **options) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def _data_array(parent, name, arr):
-    """Append a format="binary" DataArray: base64(UInt64 byte count) followed by base64(raw data),
-    the two encoded separately, as VTK's own uncompressed writer does."""
+_CHUNK_ROWS = 3 * 2**15  # rows encoded at a time: a multiple of 3, so every chunk but the last is whole base64 groups
+
+
+def _vtk_array(arr, name):
+    """`arr` as a VTK-typed numpy array (bool as UInt8), or TypeError naming it."""
     arr = np.asarray(arr)
     if arr.dtype == np.bool_:
-        arr = arr.astype(np.uint8)
+        arr = arr.view(np.uint8)
     if arr.dtype not in _VTK_TYPES:
         raise TypeError(f"array {name!r}: dtype {arr.dtype} has no VTK equivalent")
-    raw = np.ascontiguousarray(arr, dtype=arr.dtype.newbyteorder("<")).tobytes()
-    el = ET.SubElement(parent, "DataArray", type=_VTK_TYPES[arr.dtype], Name=name, format="binary")
-    if arr.ndim == 2:
-        el.set("NumberOfComponents", str(arr.shape[1]))
-    header = np.array([len(raw)], dtype="<u8").tobytes()
-    el.text = (base64.b64encode(header) + base64.b64encode(raw)).decode("ascii")
+    return arr
 
 
-def vtp_bytes(position, point_data) -> bytes:
-    """VTK XML PolyData: one point and one vertex cell per particle, plus PointData arrays.
+def _write_data(f, rows, count, components, dtype):
+    """A format="binary" DataArray's text: base64(UInt64 byte count) followed by base64(raw data),
+    the two encoded separately, as VTK's own uncompressed writer does. `rows(i, j)` gives rows
+    i..j; they are encoded _CHUNK_ROWS at a time, so the file is written without a copy of the
+    whole array (base64 of consecutive 3-byte multiples concatenates to base64 of the whole)."""
+    dtype = np.dtype(dtype).newbyteorder("<")
+    f.write(base64.b64encode(np.array([count * components * dtype.itemsize], "<u8").tobytes()))
+    for i in range(0, count, _CHUNK_ROWS):
+        f.write(base64.b64encode(np.ascontiguousarray(rows(i, min(i + _CHUNK_ROWS, count)), dtype).tobytes()))
+
+
+def write_vtp_to(f, position, point_data) -> None:
+    """Write VTK XML PolyData to the binary file `f`: one point and one vertex cell per particle,
+    plus PointData arrays, streamed (no copy of the arrays is made in memory).
 
     position: (N, 2) or (N, 3); 2D positions get z = 0.  point_data: name -> (N,) or (N, k)
     array; (N, 2) arrays are padded with a zero third component so ParaView treats them as vectors."""
@@ -92,30 +110,60 @@ def vtp_bytes(position, point_data) -> bytes:
         raise ValueError(f"position must have shape (N, 2) or (N, 3), got {pos.shape}")
     n = pos.shape[0]
 
-    def pad3(a):
-        return np.concatenate([a, np.zeros((a.shape[0], 1), a.dtype)], axis=1) if a.shape[1] == 2 else a
+    def padded(a):  # rows of `a`, a zero third component appended to 2-vectors
+        if a.ndim == 2 and a.shape[1] == 2:
+            return lambda i, j: np.concatenate([a[i:j], np.zeros((j - i, 1), a.dtype)], axis=1)
+        return lambda i, j: a[i:j]
 
     root = ET.Element("VTKFile", type="PolyData", version="1.0", byte_order="LittleEndian",
                       header_type="UInt64")
     piece = ET.SubElement(ET.SubElement(root, "PolyData"), "Piece", NumberOfPoints=str(n),
                           NumberOfVerts=str(n), NumberOfLines="0", NumberOfStrips="0",
                           NumberOfPolys="0")
+    arrays = []  # (rows, components, dtype) of each DataArray, in document order
+
+    def data_array(parent, name, arr, rows):
+        if not str(name).isprintable():
+            raise ValueError(f"point_data name {name!r} is not printable")
+        el = ET.SubElement(parent, "DataArray", type=_VTK_TYPES[arr.dtype], Name=name, format="binary")
+        components = 3 if arr.ndim == 2 and arr.shape[1] == 2 else (arr.shape[1] if arr.ndim == 2 else 1)
+        if arr.ndim == 2:
+            el.set("NumberOfComponents", str(components))
+        el.text = f"\x01{len(arrays)}\x01"  # replaced by the data when written
+        arrays.append((rows, components, arr.dtype))
+
     pd = ET.SubElement(piece, "PointData")
     for name, arr in point_data.items():
-        arr = np.asarray(arr)
+        arr = _vtk_array(arr, name)
         if arr.ndim not in (1, 2) or arr.shape[0] != n:
             raise ValueError(f"point_data[{name!r}] must have shape ({n},) or ({n}, k), got {arr.shape}")
-        _data_array(pd, name, pad3(arr) if arr.ndim == 2 else arr)
-    _data_array(ET.SubElement(piece, "Points"), "Points", pad3(pos))
+        data_array(pd, name, arr, padded(arr))
+    pos = _vtk_array(pos, "Points")
+    data_array(ET.SubElement(piece, "Points"), "Points", pos, padded(pos))
     verts = ET.SubElement(piece, "Verts")  # vertex cell i holds point i
-    _data_array(verts, "connectivity", np.arange(n, dtype=np.int64))
-    _data_array(verts, "offsets", np.arange(1, n + 1, dtype=np.int64))
-    return ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    index = np.zeros(0, np.int64)
+    data_array(verts, "connectivity", index, lambda i, j: np.arange(i, j, dtype=np.int64))
+    data_array(verts, "offsets", index, lambda i, j: np.arange(i + 1, j + 1, dtype=np.int64))
+    text = ET.tostring(root, encoding="utf-8", xml_declaration=True).split(b"\x01")
+    for k, part in enumerate(text):
+        if k % 2 == 0:
+            f.write(part)
+        else:
+            rows, components, dtype = arrays[int(part)]
+            _write_data(f, rows, n, components, dtype)
+
+
+def vtp_bytes(position, point_data) -> bytes:
+    """The bytes write_vtp_to(f, position, point_data) writes."""
+    f = io.BytesIO()
+    write_vtp_to(f, position, point_data)
+    return f.getvalue()
 
 
 def write_vtp(path, position, point_data) -> None:
-    """Atomically write vtp_bytes(position, point_data) to `path`."""
-    atomic_write_bytes(path, vtp_bytes(position, point_data))
+    """Atomically write a .vtp snapshot to `path`, streamed (write_vtp_to)."""
+    with atomic_file(path) as f:
+        write_vtp_to(f, position, point_data)
 
 
 class SnapshotSeries:

@@ -13,7 +13,7 @@ def plot_state(npz_path, out=None):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    data = np.load(npz_path)
+    data = np.load(npz_path, allow_pickle=False)
     scene = json.loads(str(data["scene"]))
     lo, hi = scene["domain"]["box_min"], scene["domain"]["box_max"]
     x, v = data["position"], data["velocity"]

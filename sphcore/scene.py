@@ -34,6 +34,19 @@ def scene_path(name):
     return shipped if shipped.exists() else path
 
 
+MAX_SCENE_BYTES = 2**20  # a scene file (or a run's scene.json) larger than this is not one
+
+
+def read_limited(path, limit=MAX_SCENE_BYTES):
+    """The text (UTF-8, a byte-order mark allowed) of file `path`, refused past `limit` bytes
+    (`sphcore run /dev/zero` would read until memory runs out)."""
+    with open(path, "rb") as f:
+        data = f.read(limit + 1)
+    if len(data) > limit:
+        raise SceneError(f"{path}: larger than {limit // 1024} KiB: not a scene file")
+    return data.decode("utf-8-sig")
+
+
 def stable_dt(scene, max_speed=0.0):
     """Largest stable time step [s] and the bound that sets it.
 
@@ -145,37 +158,37 @@ def _check(where, key, value):
         return value
     if "|" in key.kind:
         if value not in key.kind.split("|"):
-            raise SceneError(f"{where} = {value!r}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
+            raise SceneError(f"{where} = {_shown(value)}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
         return value
     if key.kind == "dt" and value == "auto":
         return value
     if key.kind == "bool":
         if not isinstance(value, bool):
-            raise SceneError(f"{where}: expected true or false, got {value!r}")
+            raise SceneError(f"{where}: expected true or false, got {_shown(value)}")
         return value
     if key.kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise SceneError(f"{where}: expected an integer ({key.unit}), got {value!r}")
+            raise SceneError(f"{where}: expected an integer ({key.unit}), got {_shown(value)}")
     elif key.kind in ("float", "dt"):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             expected = 'a number or "auto"' if key.kind == "dt" else "a number"
-            raise SceneError(f"{where}: expected {expected} ({key.unit}), got {value!r}")
+            raise SceneError(f"{where}: expected {expected} ({key.unit}), got {_shown(value)}")
         if isinstance(value, int) and not key.low <= value <= key.high:  # before float() overflows
             raise SceneError(f"{where} = {_shown(value)}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
         value = float(value)
     elif key.kind == "vec":
         if (not isinstance(value, list) or len(value) not in (2, 3)
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
-            raise SceneError(f"{where}: expected [x, y] or [x, y, z] ({key.unit}), got {value!r}")
+            raise SceneError(f"{where}: expected [x, y] or [x, y, z] ({key.unit}), got {_shown(value)}")
         return [_check(f"{where}[{i}]", Key(0, key.unit, key.low, key.high, ""), v) for i, v in enumerate(value)]
     elif key.kind in ("blocks", "boxes"):
         if not isinstance(value, list) or (not value and key.kind == "blocks"):
-            raise SceneError(f"{where}: expected a list of {{min = [...], max = [...]}} tables, got {value!r}")
+            raise SceneError(f"{where}: expected a list of {{min = [...], max = [...]}} tables, got {_shown(value)}")
         blocks = []
         corner = Key(0, key.unit, key.low, key.high, "", "vec")
         for i, block in enumerate(value):
             if not isinstance(block, dict) or set(block) != {"min", "max"}:
-                raise SceneError(f"{where}[{i}]: expected a table with exactly the keys min and max, got {block!r}")
+                raise SceneError(f"{where}[{i}]: expected a table with exactly the keys min and max, got {_shown(block)}")
             lo, hi = _check(f"{where}[{i}].min", corner, block["min"]), _check(f"{where}[{i}].max", corner, block["max"])
             if len(lo) != len(hi) or not all(a < b for a, b in zip(lo, hi)):
                 raise SceneError(f"{where}[{i}]: min {lo} must be below max {hi} on every axis")
@@ -227,7 +240,7 @@ class Scene:
         """The scene in TOML file `path`, or the shipped scene of that name (`Scene.load("dam_break_2d")`)."""
         given, path = path, scene_path(path)
         try:
-            data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark is allowed
+            data = tomllib.loads(read_limited(path))  # a byte-order mark is allowed
         except FileNotFoundError:
             if Path(given).parent == Path(".") and Path(given).suffix in ("", ".toml"):
                 raise SceneError(f"{given}: no such scene file, and no shipped scene of that name (shipped: "
@@ -302,6 +315,7 @@ class Scene:
                 raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box domain.box_min .. domain.box_max = "
                                  f"{lo} .. {hi}")
         self._check_obstacles()
+        self._check_overlaps()
         count = sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"])
         if count == 0:
             raise SceneError(f"fluid.blocks: no particle fits at fluid.spacing = {self['fluid.spacing']:g} m")
@@ -333,6 +347,17 @@ class Scene:
                 if all(((x > box["min"][a]) & (x < box["max"][a])).any() for a, x in enumerate(axes)):
                     raise SceneError(f"fluid.blocks[{i}] = {block}: particles would start inside domain.obstacles[{k}] = "
                                      f"{box}; shrink the block or move the obstacle")
+
+    def _check_overlaps(self):
+        """Two fluid blocks that overlap would put two particles where one belongs (identical blocks:
+        every particle doubled, at the same place; they fly apart at the sound speed)."""
+        blocks = self["fluid.blocks"]
+        for i in range(len(blocks)):
+            for j in range(i):
+                a, b = blocks[j], blocks[i]
+                if all(max(a["min"][k], b["min"][k]) < min(a["max"][k], b["max"][k]) for k in range(self.dim)):
+                    raise SceneError(f"fluid.blocks[{j}] = {a} and fluid.blocks[{i}] = {b} overlap: their particles "
+                                     "would be doubled where they meet; make the blocks touch at most")
 
     def _check_numbers(self, count):
         """Reject what float32 cannot hold: a folded parameter beyond its range (cohesion at a tiny

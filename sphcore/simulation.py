@@ -6,11 +6,13 @@ to bitwise the same final state as a run that was never stopped, on the same bac
 Every file is written to a temporary name and renamed, so a reader (or a resume) never sees
 half of one.
 """
+import contextlib
 import json
 import math
+import os
+import re
 import signal
 import sys
-import threading
 import zipfile
 from pathlib import Path
 
@@ -18,6 +20,7 @@ import numpy as np
 
 from sphcore.backends import empty_state, in_particle_order, make_backend, plan
 from sphcore.scene import stable_dt
+from sphcore.signals import Interrupted, Signals  # noqa: F401 (Interrupted: sphcore.simulation.Interrupted)
 
 
 class SimulationError(RuntimeError):
@@ -27,14 +30,6 @@ class SimulationError(RuntimeError):
 class CheckpointError(SimulationError):
     """A run that cannot be resumed: no checkpoint, an unreadable one, or one that does not belong
     to the scene (or to this version's parameter block); the message names the file."""
-
-
-class Interrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM stopped a run; `signum` is the signal (a shell's exit status is 128 + it)."""
-
-    def __init__(self, signum, message=None):
-        self.signum = signum
-        super().__init__(message or f"interrupted by {signal.Signals(signum).name}; files written so far are complete")
 
 
 CHECKPOINT = "checkpoint.npz"
@@ -56,7 +51,17 @@ class Simulation:
     _carried = None  # the CARRIED buffers as the last read() saw them
     energy_start = None  # the energy at the first read, the bound for every later one
 
-    def __init__(self, scene, backend="numba", **backend_options):
+    def __init__(self, scene, backend="numba", *, poll=None, **backend_options):
+        """`poll()` is called between the start-up's stages (after each kernel is compiled): a safe
+        point where sphcore.run stops on a signal. The host memory the run will need is checked
+        first (sphcore.memory): a run that would not fit is refused before anything is allocated."""
+        from sphcore import memory
+
+        memory.check(scene, backend)  # Vulkan: its device memory is checked once the device is known
+        poll = poll or (lambda: None)
+        if backend == "vulkan":  # lavapipe's device memory is host memory
+            backend_options.setdefault("before_allocating",
+                                       lambda ctx: memory.check(scene, backend, ctx.device_type == "CPU"))
         self.scene = scene
         x0 = scene.initial_positions()
         self.n, self.dim = len(x0), scene.dim
@@ -66,6 +71,10 @@ class Simulation:
         self.stages = plan(scene)
         self.backend = make_backend(backend, self.params, state, self.stages, scene.spec,
                                     precision=scene["physics.precision"], **backend_options)
+        del state, x0
+        poll()
+        if hasattr(self.backend, "warm_up"):
+            self.backend.warm_up(poll)
         self.compute_densities()  # the start's: its energy, and its first snapshot's density
         self.step_count = 0
         self.checked_step = 0
@@ -152,7 +161,17 @@ class Simulation:
 
     def restore(self, arrays):
         """Continue from `arrays` (of `checkpoint()`, possibly on another backend): its buffers
-        replace the backend's, its step becomes the step count."""
+        replace the backend's, its step becomes the step count. The energy bound is not taken
+        from `arrays`: it is the energy of the scene's initial state, which the backend holds until
+        the first restore (a stored energy_start that differs from it is refused)."""
+        if self.energy_start is None:
+            self.read()  # the initial state: its energy is the bound, as in a run never stopped
+        stored = float(arrays.get("energy_start", math.nan))
+        c2 = self.scene["fluid.stiffness"]
+        if "energy_start" in arrays and not abs(stored - self.energy_start) <= 1e-3 * (
+                abs(self.energy_start) + self.n * self.scene.mass * 1e-4 * c2):
+            raise CheckpointError(f"checkpoint field energy_start = {stored:.6g} J is not the energy of the scene's "
+                                  f"initial state, {self.energy_start:.6g} J: the checkpoint was altered")
         current = self.backend.read()
         for name in CARRIED:
             values = arrays[f"buffer_{name}"]
@@ -165,9 +184,6 @@ class Simulation:
                 self.backend.state[name][...] = values
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
-        # the bound of the run's energy checks: the start's, carried by a checkpoint (absent: this state's)
-        start = float(arrays.get("energy_start", math.nan))
-        self.energy_start = start if math.isfinite(start) else None
 
     def check_grid(self, status):
         """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
@@ -238,8 +254,9 @@ class Simulation:
                      "(the walls' ghost particles) push it; a particle that starts on a wall is pushed by images "
                      "that coincide with it: start the fluid at least fluid.spacing / 2 inside the box")
         else:
+            lower = "time.dt_fraction" if scene["time.dt"] == "auto" else "time.dt"
             cause = (f"dt = {dt:g} s is within the estimated {bound} bound {dt_max:.3g} s, yet the state gains "
-                     "energy: lower time.dt_fraction (a stiff fluid needs a fraction of the CFL bound)")
+                     f"energy: lower {lower} (a stiff fluid needs a fraction of the CFL bound)")
         raise SimulationError(f"blow-up at step {self.step_count} (t = {self.time:.6g} s): the energy rose from "
                               f"{self.energy_start:.4g} J to {energy:.4g} J and particle {i} moves at "
                               f"{speed[i]:.3g} m/s (sound speed {c:.3g} m/s); likely cause: {cause}")
@@ -302,38 +319,16 @@ def final_arrays(sim, state):
     return arrays
 
 
-class _Signals:
-    """SIGINT and SIGTERM for the length of a run (main thread only; a signal set to be ignored
-    stays ignored). While `hold` is off (before the first step) a signal stops the run at once;
-    once on, the first signal is only noted, and the run stops at the next step boundary, where
-    the state is whole and a checkpoint can be written; a second signal stops it at once (files
-    stay complete: each is written under a temporary name and renamed)."""
-
-    def __init__(self):
-        self.received, self.hold, self._previous = None, False, {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for signum in (signal.SIGINT, signal.SIGTERM):
-                if signal.getsignal(signum) is not signal.SIG_IGN:
-                    self._previous[signum] = signal.signal(signum, self._handle)
-        return self
-
-    def __exit__(self, *exc):
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)
-
-    def _handle(self, signum, frame):
-        if self.hold and self.received is None:
-            self.received = signum
-            return
-        raise Interrupted(signum)
-
-
-def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpoint=None, **backend_options):
+def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpoint=None, overwrite=False,
+        **backend_options):
     """Run `scene` for `steps` steps in all, writing snapshots (VTK .vtp + .pvd), checkpoints and
     final.npz to `out_dir`; return the final arrays. `checkpoint`: arrays of load_checkpoint to
     start from (see `resume`).
+
+    The run holds a lock on `out_dir` throughout (sphcore.folder): a second run into it is
+    refused. A new run into a folder that holds a run is refused unless `overwrite`, which deletes
+    that run's files first. A run that would not fit in memory is refused before it allocates
+    (sphcore.memory); running out of memory all the same raises SimulationError, files kept.
 
     Snapshots go out every time.output_every steps and at the end; checkpoints at the start,
     every time.checkpoint_every steps and at the end. A blow-up raises SimulationError after
@@ -343,17 +338,22 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
     """
     from tqdm import tqdm
 
+    from sphcore import folder, memory
     from sphcore.output import SnapshotSeries, atomic_savez, atomic_write_bytes
     from sphcore.vk_runner import VulkanError
 
     steps = scene["time.steps"] if steps is None else steps
     out_dir = Path(out_dir or Path("runs") / scene["name"])
+    memory.check(scene, backend)  # before the folder is touched (Simulation checks again, with the device)
     if checkpoint is not None and steps < int(checkpoint["step"]):
         raise CheckpointError(f"{out_dir / CHECKPOINT} is at step {int(checkpoint['step'])}, past the {steps} "
                               f"steps asked for: give --steps {int(checkpoint['step'])} or more")
     every, checkpoint_every = scene["time.output_every"], scene["time.checkpoint_every"]
-    with _Signals() as signals:
-        out_dir.mkdir(parents=True, exist_ok=True)
+    with Signals() as signals, _locked(out_dir, folder.lock):
+        folder.remove_stale_temporaries(out_dir)
+        if checkpoint is None:
+            folder.prepare_new_run(out_dir, overwrite)
+        signals.poll()
         if checkpoint is None:
             atomic_write_bytes(out_dir / "scene.json", scene.to_json().encode())  # what render and resume read
         try:
@@ -361,7 +361,13 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
         except (SyntaxError, ValueError) as e:  # xml.etree's ParseError is a SyntaxError
             raise SimulationError(f"{out_dir / scene['name']}.pvd: not a readable ParaView collection ({e}); move "
                                   "it away, or write to another folder") from None
-        sim = Simulation(scene, backend, **backend_options)
+        try:
+            sim = Simulation(scene, backend, poll=signals.poll, **backend_options)
+        except VulkanError as e:
+            raise _numba_hint(e, scene) from None
+        except MemoryError as e:
+            raise SimulationError(f"out of memory while starting the run ({e}); nothing to resume") from None
+        signals.poll()
         saved = None  # the step of the last checkpoint written or resumed from
 
         def snapshot(state):
@@ -379,41 +385,86 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
                 sim.restore(checkpoint)
                 saved = sim.step_count
                 note_resume(checkpoint, sim, out_dir)
-            signals.hold = True
             state = sim.read()
             if checkpoint is None:
                 snapshot(state)
                 save_checkpoint()
+            signals.stepping = True
             chunk = max(1, min(every, 50))
             with tqdm(total=steps, initial=sim.step_count, unit="step", disable=not progress,
                       desc=f"{scene['name']} [{backend}]") as bar:
-                while sim.step_count < steps:
+                while sim.step_count < steps and not signals.received:
                     k = min(chunk, steps - sim.step_count, every - sim.step_count % every,
                             checkpoint_every - sim.step_count % checkpoint_every)
                     sim.advance(k)
                     bar.update(k)
                     if sim.step_count % every == 0 or sim.step_count == steps:
+                        state = None  # the previous state's arrays are freed before the next read
                         state = sim.read()
                         snapshot(state)
                     if sim.step_count % checkpoint_every == 0 or sim.step_count == steps or signals.received:
                         save_checkpoint()
-                    if signals.received:
-                        raise Interrupted(signals.received, f"interrupted by {signal.Signals(signals.received).name} "
-                                          f"at step {sim.step_count} of {steps}; checkpoint written: continue "
-                                          f"with `sphcore run --resume {out_dir}`")
+                if signals.received and sim.step_count < steps:
+                    if saved != sim.step_count:
+                        save_checkpoint()
+                    raise Interrupted(signals.received, f"interrupted by {signal.Signals(signals.received).name} "
+                                      f"at step {sim.step_count} of {steps}; checkpoint written: continue "
+                                      f"with `sphcore run --resume {out_dir}`")
             arrays = final_arrays(sim, state)
             atomic_savez(out_dir / "final.npz", **arrays)
         except BaseException as e:
+            _count_validation(sim)
             try:
                 sim.close()
             except Exception:
                 pass  # a lost device fails to close too: the first error is the one to report
             if isinstance(e, VulkanError) and saved is not None:
-                raise VulkanError(f"{e}; the checkpoint at step {saved} is intact: continue with `sphcore run "
-                                  f"--resume {out_dir}` (add --backend numba to continue on the CPU)") from None
+                cpu = " (add --backend numba to continue on the CPU)" if memory.fits(scene, "numba") else ""
+                raise _numba_hint(VulkanError(f"{e}; the checkpoint at step {saved} is intact: continue with "
+                                              f"`sphcore run --resume {out_dir}`{cpu}"), scene) from None
+            if isinstance(e, MemoryError):
+                kept = f"the checkpoint at step {saved} is intact" if saved is not None else "nothing to resume"
+                raise SimulationError(f"out of memory at step {sim.step_count} ({e}); files written so far are "
+                                      f"complete, {kept}") from None
             raise
+        _count_validation(sim)
         sim.close()
         return arrays
+
+
+def _count_validation(sim):
+    """With the Vulkan validation layers on, say how many errors they reported (each was printed as it came)."""
+    ctx = getattr(sim.backend, "ctx", None)
+    if getattr(ctx, "validation", False):
+        count = len(ctx.validation_messages)
+        print(f"sphcore: {count} Vulkan validation error(s){' (printed above)' if count else ''}", file=sys.stderr)
+
+
+@contextlib.contextmanager
+def _locked(out_dir, lock):
+    """Hold `lock(out_dir)` (a file descriptor) for the length of the block."""
+    fd = lock(out_dir)
+    try:
+        yield
+    finally:
+        os.close(fd)
+
+
+def _numba_hint(error, scene):
+    """`error` (a VulkanError) with its "--backend numba" suggestion kept only where a numba run of
+    `scene` would fit in memory; else the suggestion gives way to the figures."""
+    from sphcore import memory
+    from sphcore.vk_runner import VulkanError
+
+    text = str(error)
+    if "--backend numba" not in text:
+        return error
+    try:
+        memory.check(scene, "numba")
+        return error
+    except memory.MemoryLimitError as e:
+        text = re.sub(r",? or (run with )?--backend numba", "", text)
+        return VulkanError(f"{text} (--backend numba would not fit either: {str(e).split(': ', 1)[1]})")
 
 
 def load_checkpoint(out_dir):
@@ -426,18 +477,15 @@ def load_checkpoint(out_dir):
     if not path.is_file():
         raise CheckpointError(f"{path}: no such file; `sphcore run SCENE --out {out_dir}` writes one at the start "
                               "and every time.checkpoint_every steps")
-    needed = {"step", "scene", "params", "backend", "device"} | {f"buffer_{name}" for name in CARRIED}
+    from sphcore.checkpoint import CheckpointFieldError, read_checked, read_scene
+    from sphcore.scene import read_limited
+
     try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
-        missing = sorted(needed - set(arrays))
-        if missing:
-            raise ValueError(f"no {missing[0]}: not a checkpoint of this version of sphcore")
-        stored_scene = json.loads(str(arrays["scene"]))
+        stored_scene = json.loads(read_scene(path))
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # JSONDecodeError is a ValueError
         raise CheckpointError(f"{path}: not a readable checkpoint ({e})") from None
     try:
-        scene = Scene.from_dict(json.loads(scene_file.read_text(encoding="utf-8")), str(scene_file))
+        scene = Scene.from_dict(json.loads(read_limited(scene_file)), str(scene_file))
     except (OSError, ValueError) as e:  # SceneError, JSONDecodeError and UnicodeDecodeError are ValueErrors
         raise CheckpointError(f"{scene_file}: {getattr(e, 'strerror', None) or e}; the run's scene is needed "
                               "to resume") from None
@@ -446,8 +494,12 @@ def load_checkpoint(out_dir):
         raise CheckpointError(f"{scene_file} is not the scene {path} was computed with ({difference}); "
                               "put the run's scene back, or start a new run in another folder")
     n = len(scene.initial_positions())
-    if len(arrays["buffer_particle_id"]) != n:
-        raise CheckpointError(f"{path} holds {len(arrays['buffer_particle_id'])} particles, the scene {n}")
+    try:
+        arrays = read_checked(path, scene, scene.params(n), CARRIED)
+    except CheckpointFieldError as e:
+        raise CheckpointError(f"{path}: checkpoint {e}; refused") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise CheckpointError(f"{path}: not a readable checkpoint ({e})") from None
     params = scene.params(n)
     if arrays["params"].tobytes() != params.tobytes():
         stored = np.frombuffer(arrays["params"].tobytes(), params.dtype) if arrays["params"].nbytes == params.nbytes else None

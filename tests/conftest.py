@@ -92,3 +92,19 @@ def schema_keys(schema=None, prefix=""):
             yield from schema_keys(key, f"{prefix}{name}.")
         else:
             yield f"{prefix}{name}", key
+
+
+def _validation_errors():
+    """Every Vulkan validation-layer error reported in this process so far (any Context's)."""
+    import sys
+    context = sys.modules.get("sphcore.vk_runner.context")
+    return [m for _, messages in context._INSTANCES.values() for m in messages] if context else []
+
+
+@pytest.fixture(autouse=True)
+def no_validation_errors():
+    """A test fails on any Vulkan validation error reported while it ran, wherever it came from."""
+    before = len(_validation_errors())
+    yield
+    new = _validation_errors()[before:]
+    assert not new, f"Vulkan validation errors: {new}"

@@ -5,6 +5,7 @@ Pitfalls of the `vulkan` package handled here: VK_WHOLE_SIZE is -1 there, so the
 return cdata arrays ([0]); a mapped pointer is copied out before vkUnmapMemory.
 """
 import os
+import sys
 
 import numpy as np
 
@@ -277,7 +278,7 @@ class Context:
             device = os.environ.get("SPHCORE_VK_DEVICE") or None
         if validation is None:
             validation = os.environ.get("SPHCORE_VK_VALIDATION", "") not in ("", "0")
-        key = bool(validation)
+        key = self.validation = bool(validation)
         if key not in _INSTANCES:
             self._instance_messages = []
             _INSTANCES[key] = (self._create_instance(validation), self._instance_messages)
@@ -338,7 +339,9 @@ class Context:
         if validation:
             def on_message(severity, kind, data, user):
                 if severity & vk.VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT:
-                    self._instance_messages.append(_text(data.pMessage))
+                    text = _text(data.pMessage)
+                    self._instance_messages.append(text)
+                    print(f"sphcore: Vulkan validation: {text}", file=sys.stderr, flush=True)  # as it comes
                 return 0
 
             create = vk.vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT")
