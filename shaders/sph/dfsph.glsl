@@ -1,0 +1,56 @@
+// DFSPH, the divergence-free SPH pressure solver (Bender & Koschier 2015, 2017; physics.pressure_solver =
+// "dfsph", specialization constant DFSPH): the layout of its state buffers, shared by dfsph_factor.comp,
+// dfsph_residual.comp, dfsph_velocity.comp and dfsph_check.comp.
+// Mirror: sphcore/sph/dfsph.py (same names, same values).
+//
+// One time step (sphcore.backends.plan; Bender & Koschier 2017, Alg. 2; the order of SPlisHSPlasH's
+// TimeStepDFSPH::step):
+//   [grid sort] compute_density (summation) -> dfsph_factor (alpha_i) -> divergence-free solve (solve 1)
+//   -> compute_forces (no pressure term) -> reduce_dt, choose_dt (CFL on the particle speed)
+//   -> constant-density solve (solve 2) -> integrate (v += dt a, x += dt v).
+// A solve is dfsph_residual, dfsph_check, then max_iterations times [dfsph_velocity, dfsph_residual,
+// dfsph_check], all recorded into the command buffer (no readback). The stage's solve is P.level
+// (1 or 2; for reduce_cells P.level is a pyramid level). dfsph_check reduces the mean residual in a
+// fixed order and, once it is under the tolerance (after the minimum iterations) or the budget is
+// spent, sets the solve's done flag: every later stage of that solve returns at once.
+// With V_j = m / rho_0 and V grad_i W_ij = -(pressure_coef / rho_0) kernel_gradient r_hat_ij:
+//   alpha_i = 1 / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2)                     (dfsph_factor)
+//   d_i = sum_j V (v_i - v_j) . grad W_ij, the density ratio's rate                   (dfsph_residual)
+//   solve 1: r_i = max(d_i, 0), s_i = alpha_i r_i,           v_i -= sum_j V (s_i + s_j) grad W_ij
+//   solve 2: r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) (d* of v* = v + dt a),
+//            s_i = alpha_i r_i / dt^2,                       a_i -= sum_j V (s_i + s_j) grad W_ij
+//   (dfsph_velocity; kappa_i = sum over iterations of s_i, started at WARM_START times the last step's,
+//   is the pressure p_i = kappa_i rho_i^2 / rho_0). Errors: solve 1
+//   the mean of r_i dt, solve 2 the mean of r_i, against fluid.max_divergence_error and max_density_error.
+
+const uint SOLVE_DIVERGENCE = 1u;       // P.level of the divergence-free solve's stages
+const uint SOLVE_DENSITY = 2u;          // P.level of the constant-density solve's stages
+const uint SOLVE_WARM_START = 3u;       // P.level of dfsph_velocity's warm start of the constant-density solve:
+                                        // the acceleration of WARM_START times the last step's stiffness sum
+                                        // (particle_kappa), applied before the first residual
+const float WARM_START = 0.5;           // as SPlisHSPlasH: half the last pressure (a full one overshoots where
+                                        // the flow decompresses, and the solve only ever adds pressure)
+
+// dfsph_control (uint): set by the host (max iterations), the stages and dfsph_check
+const uint CONTROL_DONE = 0u;           // [CONTROL_DONE + solve]: 1 once the solve has stopped this step
+const uint CONTROL_ITERATIONS = 2u;     // [CONTROL_ITERATIONS + solve]: its velocity updates this step
+const uint CONTROL_STEP = 5u;           // steps completed (the device's count: the history's row)
+const uint CONTROL_FAILURES = 6u;       // solves that spent their budget unconverged, since the start
+const uint CONTROL_FAILED_STEP = 7u;    // the first of them: its step (1 = the first step)
+const uint CONTROL_FAILED_SOLVE = 8u;   //   and its solve
+const uint CONTROL_MAX_ITERATIONS = 9u; // fluid.max_iterations (host)
+const uint CONTROL_SIZE = 16u;
+
+// dfsph_state (float): tolerances (host) and errors
+const uint STATE_TOLERANCE = 0u;        // [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error
+const uint STATE_ERROR = 2u;            // [STATE_ERROR + solve]: the error the solve stopped at this step
+const uint STATE_FAILED_ERROR = 5u;     // the error the first unconverged solve stopped at
+const uint STATE_SIZE = 8u;
+
+// dfsph_history (float, HISTORY_COLUMNS a row): one row per step, row (step - 1) % HISTORY_ROWS, written
+// when the constant-density solve stops; the host reads it at least every HISTORY_ROWS steps
+const uint HISTORY_ROWS = 256u;
+const uint HISTORY_COLUMNS = 8u;        // step, dt, time, divergence iterations, divergence error,
+                                        // density iterations, density error, 1 where both converged
+const uint MIN_ITERATIONS_DIVERGENCE = 1u;  // as SPlisHSPlasH: at least one divergence update, and
+const uint MIN_ITERATIONS_DENSITY = 2u;     // two density updates, per step

@@ -1,0 +1,74 @@
+#version 460
+// DFSPH's convergence test of solve P.level (dfsph.glsl), one work group: the mean residual, summed in a
+// fixed order (each invocation its strided share in index order, then invocation 0 the shares in order:
+// no atomics, the same bits on every run and, up to the arithmetic's rounding, on both backends), is the
+// solve's error (divergence-free: times dt). Once it is under the solve's tolerance after its minimum
+// iterations, or fluid.max_iterations updates are spent, the solve's done flag is set and every later
+// stage of the solve returns at once; a solve stopped unconverged is counted and the first one recorded
+// (step, solve, error). The constant-density solve's stop ends the step: a row of dfsph_history.
+// Mirror: sphcore/sph/dfsph_check.py (same names, same statement order, same step labels; one local loop
+// per phase between barriers).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+#include "real.glsl"
+#include "dfsph.glsl"
+
+layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
+layout(std430, binding = 23) readonly buffer ParticleResidual { real particle_residual[]; };
+layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 25) buffer DfsphState { float dfsph_state[]; };
+layout(std430, binding = 26) writeonly buffer DfsphHistory { float dfsph_history[]; };
+
+shared real s_sum[gl_WorkGroupSize.x];
+
+void main() {
+    // [1] the solve; nothing once it has stopped (the flag is the same for every invocation)
+    uint lid = gl_LocalInvocationID.x;
+    uint solve = P.level;
+    if (dfsph_control[CONTROL_DONE + solve] != 0u) return;
+    // [2] each invocation sums the residuals lid, lid + L, lid + 2 L, ... in index order
+    real sum = real(0.0);
+    for (uint k = lid; k < P.n; k += gl_WorkGroupSize.x) sum += particle_residual[k];
+    s_sum[lid] = sum;
+    barrier();
+    // [3] invocation 0: the shares in order, their mean: the error (divergence-free: times dt, the last
+    //     step's, or P.dt before the first)
+    if (lid != 0u) return;
+    real total = real(0.0);
+    for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_sum[k];
+    float error = float(total / real(P.n));
+    if (solve == SOLVE_DIVERGENCE) error *= time_state[0].x > 0.0 ? time_state[0].x : P.dt;
+    // [4] stop: converged after the minimum iterations, or the budget spent
+    uint iterations = dfsph_control[CONTROL_ITERATIONS + solve];
+    uint least = solve == SOLVE_DENSITY ? MIN_ITERATIONS_DENSITY : MIN_ITERATIONS_DIVERGENCE;
+    bool converged = iterations >= least && error <= dfsph_state[STATE_TOLERANCE + solve];
+    if (!converged && iterations < dfsph_control[CONTROL_MAX_ITERATIONS]) return;
+    dfsph_control[CONTROL_DONE + solve] = 1u;
+    dfsph_state[STATE_ERROR + solve] = error;
+    // [5] a solve that spent its budget unconverged: counted, the first one recorded
+    if (!converged) {
+        dfsph_control[CONTROL_FAILURES] += 1u;
+        if (dfsph_control[CONTROL_FAILURES] == 1u) {
+            dfsph_control[CONTROL_FAILED_STEP] = dfsph_control[CONTROL_STEP] + 1u;
+            dfsph_control[CONTROL_FAILED_SOLVE] = solve;
+            dfsph_state[STATE_FAILED_ERROR] = error;
+        }
+    }
+    // [6] the constant-density solve ends the step: its history row, the step count
+    if (solve != SOLVE_DENSITY) return;
+    uint step = dfsph_control[CONTROL_STEP] + 1u;
+    uint row = (step - 1u) % HISTORY_ROWS * HISTORY_COLUMNS;
+    float divergence_error = dfsph_state[STATE_ERROR + SOLVE_DIVERGENCE];
+    bool both = converged && divergence_error <= dfsph_state[STATE_TOLERANCE + SOLVE_DIVERGENCE];
+    dfsph_history[row] = float(step);
+    dfsph_history[row + 1u] = time_state[0].x;
+    dfsph_history[row + 2u] = time_state[0].z + time_state[0].w;
+    dfsph_history[row + 3u] = float(dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE]);
+    dfsph_history[row + 4u] = divergence_error;
+    dfsph_history[row + 5u] = float(iterations);
+    dfsph_history[row + 6u] = error;
+    dfsph_history[row + 7u] = both ? 1.0 : 0.0;
+    dfsph_control[CONTROL_STEP] = step;
+}

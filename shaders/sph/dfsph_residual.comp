@@ -1,0 +1,100 @@
+#version 460
+// DFSPH's residual r_i of solve P.level (dfsph.glsl), one invocation per particle: the density
+// ratio's rate d_i = sum_j V (v_i - v_j) . grad W_ij over the neighbours and their wall and obstacle
+// images (an image's velocity mirrored on its flipped axes, as compute_density's continuity rate).
+//   divergence-free solve: r_i = max(d_i, 0) [1/s], with the velocity v;
+//   constant-density solve: r_i = max(rho_i / rho_0 + dt d_i - 1, 0), with v* = v + dt a (the velocity
+//   the step would integrate) and this step's dt (time_state, choose_dt.comp).
+// Only compression is corrected (a free surface's density deficit is not a tension). Returns at once
+// once the solve has stopped (dfsph_check.comp).
+// Mirror: sphcore/sph/dfsph_residual.py (same names, same statement order, same step labels).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+#include "real.glsl"
+#include "cells.glsl"
+#include "kernels.glsl"
+#include "dfsph.glsl"
+
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+#include "obstacles.glsl"
+
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
+layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
+layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_residual[]; };
+layout(std430, binding = 24) readonly buffer DfsphControl { uint dfsph_control[]; };
+
+void main() {
+    // [1] one invocation per particle; nothing once the solve has stopped
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= P.n) return;
+    uint solve = P.level;
+    if (dfsph_control[CONTROL_DONE + solve] != 0u) return;
+    // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
+    real dt = real(time_state[0].x);
+    real kick = solve == SOLVE_DENSITY ? dt : real(0.0);
+    real3 xi = particle_x[i].xyz;
+    real3 vi = particle_v[i].xyz + kick * particle_a[i].xyz;
+    // [3] wall and obstacle images as in compute_density
+    real3 wall;
+    uint mirrored = near_walls(xi, wall);
+    real3 inward;
+    mirrored = near_obstacles(xi, mirrored, wall, inward);
+    // [4] d_i over every other particle and every image within h
+    real coef = real(P.pressure_coef) / real(P.rest_density);
+    real d = real(0.0);
+    for (uint image = 0u; image < 8u; ++image) {
+        if ((image & ~mirrored) != 0u) continue;
+        bool fx = (image & 1u) != 0u;
+        bool fy = (image & 2u) != 0u;
+        bool fz = (image & 4u) != 0u;
+        real3 xm = reflected(xi, wall, image);
+        ivec3 base = cell_of(xm);
+        // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        for (uint k = 0u; k < range_count(); ++k) {
+            uint start = 0u;
+            uint end = P.n;
+            if (GRID) {
+                int first;
+                int last;
+                if (!range_cells(base, k, first, last)) continue;
+                start = cell_start[first];
+                end = cell_start[last] + cell_pyramid[last];
+            }
+            for (uint j = start; j < end; ++j) {
+                if (j == i && image == 0u) continue;
+                real3 xk = reflected(particle_x[j].xyz, wall, image);
+                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                real3 r = xi - xk;
+                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                if (r2 >= P.h2) continue;
+                real rlen = sqrt(r2);
+                // [6] direction from the neighbour to i, as in compute_forces
+                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
+                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
+                if (fy) r_hat = real3(0.0, inward.y, 0.0);
+                if (fz) r_hat = real3(0.0, 0.0, inward.z);
+                if (rlen > real(0.0)) r_hat = r / rlen;
+                // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+                real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
+                real vk_x = fx ? -vj.x : vj.x;
+                real vk_y = fy ? -vj.y : vj.y;
+                real vk_z = fz ? -vj.z : vj.z;
+                real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+                // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+                d -= coef * kernel_gradient(r2, rlen) * v_r;
+            }
+        }
+    }
+    // [9] the residual: compression only
+    real residual = max(d, real(0.0));
+    if (solve == SOLVE_DENSITY) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
+    // [10] store
+    particle_residual[i] = residual;
+}

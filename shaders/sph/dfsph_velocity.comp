@@ -1,0 +1,109 @@
+#version 460
+// One Jacobi update of DFSPH's solve P.level (dfsph.glsl), one invocation per particle: with the
+// stiffness s_j = alpha_j r_j (divergence-free, [1/s]) or alpha_j r_j / dt^2 (constant density, [1/s^2])
+// of every particle from the last dfsph_residual, the change -sum_j V (s_i + s_j) grad W_ij over the
+// neighbours and their wall and obstacle images (an image carries its particle's s) is added to the
+// velocity (divergence-free) or to the acceleration the step integrates (constant density, which also
+// accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's m p_i / rho_i^2 = V s_i).
+// Every invocation reads only the residuals and writes only its own particle: a Jacobi sweep.
+// Returns at once once the solve has stopped; invocation 0 counts the update.
+// Mirror: sphcore/sph/dfsph_velocity.py (same names, same statement order, same step labels).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+#include "real.glsl"
+#include "cells.glsl"
+#include "kernels.glsl"
+#include "dfsph.glsl"
+
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+#include "obstacles.glsl"
+
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
+layout(std430, binding = 2) buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 4) buffer ParticleP { real particle_p[]; };
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
+layout(std430, binding = 22) readonly buffer ParticleAlpha { real particle_alpha[]; };
+layout(std430, binding = 23) readonly buffer ParticleResidual { real particle_residual[]; };
+layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
+
+void main() {
+    // [1] one invocation per particle; nothing once the solve has stopped; invocation 0 counts the update
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= P.n) return;
+    uint solve = P.level;
+    bool warm = solve == SOLVE_WARM_START;  // the warm start: always, and not counted
+    if (!warm && dfsph_control[CONTROL_DONE + solve] != 0u) return;
+    if (!warm && i == 0u) dfsph_control[CONTROL_ITERATIONS + solve] += 1u;
+    // [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
+    //     start: the stiffness sum, particle_kappa)
+    real dt = real(time_state[0].x);
+    real scale = solve == SOLVE_DIVERGENCE ? real(1.0) : real(1.0) / (dt * dt);
+    real si = warm ? particle_kappa[i] : scale * particle_alpha[i] * particle_residual[i];
+    real3 xi = particle_x[i].xyz;
+    // [3] wall and obstacle images as in compute_density
+    real3 wall;
+    uint mirrored = near_walls(xi, wall);
+    real3 inward;
+    mirrored = near_obstacles(xi, mirrored, wall, inward);
+    // [4] the change over every other particle and every image within h
+    real coef = real(P.pressure_coef) / real(P.rest_density);
+    real3 change = real3(0.0);
+    for (uint image = 0u; image < 8u; ++image) {
+        if ((image & ~mirrored) != 0u) continue;
+        bool fx = (image & 1u) != 0u;
+        bool fy = (image & 2u) != 0u;
+        bool fz = (image & 4u) != 0u;
+        real3 xm = reflected(xi, wall, image);
+        ivec3 base = cell_of(xm);
+        // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        for (uint k = 0u; k < range_count(); ++k) {
+            uint start = 0u;
+            uint end = P.n;
+            if (GRID) {
+                int first;
+                int last;
+                if (!range_cells(base, k, first, last)) continue;
+                start = cell_start[first];
+                end = cell_start[last] + cell_pyramid[last];
+            }
+            for (uint j = start; j < end; ++j) {
+                if (j == i && image == 0u) continue;
+                real3 xk = reflected(particle_x[j].xyz, wall, image);
+                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                real3 r = xi - xk;
+                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                if (r2 >= P.h2) continue;
+                real rlen = sqrt(r2);
+                // [6] direction from the neighbour to i, as in compute_forces
+                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
+                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
+                if (fy) r_hat = real3(0.0, inward.y, 0.0);
+                if (fz) r_hat = real3(0.0, 0.0, inward.z);
+                if (rlen > real(0.0)) r_hat = r / rlen;
+                // [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+                //     compressed neighbourhood
+                real sj = warm ? particle_kappa[j] : scale * particle_alpha[j] * particle_residual[j];
+                change += (coef * kernel_gradient(r2, rlen) * (si + sj)) * r_hat;
+            }
+        }
+    }
+    // [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+    //     (constant density; only the warm start reads the sum of others, and it writes none)
+    if (solve == SOLVE_DIVERGENCE) {
+        particle_v[i] = real4(particle_v[i].xyz + change, 0.0);
+    } else {
+        particle_a[i] = real4(particle_a[i].xyz + change, 0.0);
+        real kappa = particle_kappa[i];
+        if (!warm) kappa += si;
+        if (!warm) particle_kappa[i] = kappa;
+        real rhoi = particle_rho[i];
+        particle_p[i] = kappa * rhoi * rhoi / real(P.rest_density);
+    }
+}

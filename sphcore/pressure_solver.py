@@ -1,0 +1,79 @@
+"""DFSPH on the host (physics.pressure_solver = "dfsph"): its settings into the state, its per-step
+log out of the device, and the report of a solve that did not converge.
+
+The solve itself runs on the device with no readback (shaders/sph/dfsph.glsl describes how its loop
+stops there). Each step's iteration counts and final errors land in a ring of
+dfsph_history.HISTORY_ROWS rows; `SolverLog.collect` reads the ring after every chunk of at most that
+many steps (Simulation.advance), so no row is overwritten before it is read.
+"""
+import warnings
+
+import numpy as np
+
+from sphcore.sph.dfsph import (CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES, CONTROL_MAX_ITERATIONS,
+                               HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_FAILED_ERROR, STATE_TOLERANCE)
+
+LOG_COLUMNS = ("step", "dt", "time", "divergence_iterations", "divergence_error", "density_iterations",
+               "density_error", "converged")
+SOLVES = {SOLVE_DIVERGENCE: ("divergence-free", "fluid.max_divergence_error"),
+          SOLVE_DENSITY: ("constant-density", "fluid.max_density_error")}
+
+
+class ConvergenceWarning(UserWarning):
+    """A DFSPH solve spent fluid.max_iterations updates without reaching its tolerance."""
+
+
+def init_state(state, scene):
+    """Write the scene's solver settings into `state` (of backends.empty_state): the iteration budget
+    into dfsph_control, the two tolerances into dfsph_state."""
+    state["dfsph_control"][CONTROL_MAX_ITERATIONS] = scene["fluid.max_iterations"]
+    state["dfsph_state"][STATE_TOLERANCE + SOLVE_DIVERGENCE] = scene["fluid.max_divergence_error"]
+    state["dfsph_state"][STATE_TOLERANCE + SOLVE_DENSITY] = scene["fluid.max_density_error"]
+
+
+class SolverLog:
+    """The rows of dfsph_history, one per step (LOG_COLUMNS), keyed by step; unconverged solves are
+    reported as ConvergenceWarnings naming the step, the solve, the error reached and the tolerance."""
+
+    def __init__(self, scene):
+        self.scene, self.rows, self.reported = scene, {}, 0
+
+    def collect(self, backend, first, last):
+        """Read the rows of steps first + 1 .. last (at most HISTORY_ROWS of them) and report what did
+        not converge."""
+        if last - first > HISTORY_ROWS:
+            raise ValueError(f"steps {first + 1}..{last}: the history ring holds {HISTORY_ROWS} steps")
+        if last <= first:
+            return
+        history = backend.read_buffer("dfsph_history")
+        for step in range(first + 1, last + 1):
+            row = history[(step - 1) % HISTORY_ROWS].astype(np.float64)
+            if int(row[0]) != step:  # the step count is the device's and the host's: they cannot differ
+                raise RuntimeError(f"DFSPH history: row for step {step} holds step {int(row[0])}")
+            self.rows[step] = row
+        control = backend.read_buffer("dfsph_control")
+        failures = int(control[CONTROL_FAILURES])
+        if failures > self.reported:
+            self.warn(control, backend.read_buffer("dfsph_state"), failures, last)
+            self.reported = failures
+
+    def warn(self, control, state, failures, last):
+        scene = self.scene
+        bad = [r for s, r in sorted(self.rows.items()) if r[7] == 0 and s > 0]
+        solve = int(control[CONTROL_FAILED_SOLVE])
+        name, key = SOLVES.get(solve, ("?", "?"))
+        first = (f"the first at step {int(control[CONTROL_FAILED_STEP])}: the {name} solve stopped at error "
+                 f"{float(state[STATE_FAILED_ERROR]):.3g} > {key} = {scene[key]:g}")
+        latest = ""
+        if bad:
+            r = bad[-1]
+            latest = (f"; the latest at step {int(r[0])} (t = {r[2]:.4g} s): divergence error {r[4]:.3g} after "
+                      f"{int(r[3])} updates, density error {r[6]:.3g} after {int(r[5])}")
+        warnings.warn(ConvergenceWarning(
+            f"DFSPH did not converge within fluid.max_iterations = {scene['fluid.max_iterations']} in {failures} "
+            f"solve(s) up to step {last}; {first}{latest}. Raise fluid.max_iterations, lower time.cfl_number, or "
+            "loosen the tolerance"), stacklevel=3)
+
+    def array(self):
+        """The rows in step order, (steps, len(LOG_COLUMNS)) float64."""
+        return np.array([self.rows[s] for s in sorted(self.rows)], np.float64).reshape(-1, len(LOG_COLUMNS))

@@ -1,0 +1,33 @@
+"""DFSPH's state layout (physics.pressure_solver = "dfsph"): indices into dfsph_control, dfsph_state
+and dfsph_history, shared by the dfsph_* mirrors.
+
+Mirror of shaders/sph/dfsph.glsl: same names, same values (the step, the solves and their
+equations are described there).
+"""
+SOLVE_DIVERGENCE = 1  # P.level of the divergence-free solve's stages
+SOLVE_DENSITY = 2  # P.level of the constant-density solve's stages
+SOLVE_WARM_START = 3  # P.level of dfsph_velocity's warm start of the constant-density solve
+WARM_START = 0.5  # as SPlisHSPlasH: half the last pressure
+
+# dfsph_control (uint32)
+CONTROL_DONE = 0  # [CONTROL_DONE + solve]: 1 once the solve has stopped this step
+CONTROL_ITERATIONS = 2  # [CONTROL_ITERATIONS + solve]: its velocity updates this step
+CONTROL_STEP = 5  # steps completed (the device's count: the history's row)
+CONTROL_FAILURES = 6  # solves that spent their budget unconverged, since the start
+CONTROL_FAILED_STEP = 7  # the first of them: its step (1 = the first step)
+CONTROL_FAILED_SOLVE = 8  # and its solve
+CONTROL_MAX_ITERATIONS = 9  # fluid.max_iterations (host)
+CONTROL_SIZE = 16
+
+# dfsph_state (float32)
+STATE_TOLERANCE = 0  # [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error
+STATE_ERROR = 2  # [STATE_ERROR + solve]: the error the solve stopped at this step
+STATE_FAILED_ERROR = 5  # the error the first unconverged solve stopped at
+STATE_SIZE = 8
+
+# dfsph_history (float32, HISTORY_COLUMNS a row)
+HISTORY_ROWS = 256
+HISTORY_COLUMNS = 8  # step, dt, time, divergence iterations, divergence error, density iterations,
+#                      density error, 1 where both converged
+MIN_ITERATIONS_DIVERGENCE = 1
+MIN_ITERATIONS_DENSITY = 2

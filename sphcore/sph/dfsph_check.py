@@ -1,0 +1,97 @@
+"""DFSPH's convergence test of solve P.level (dfsph.py), one work group: the mean residual in a fixed
+order is the solve's error; under the tolerance after the minimum iterations, or with the budget spent,
+the solve's done flag is set; an unconverged stop is counted and the first recorded; the
+constant-density solve's stop writes the step's row of dfsph_history.
+
+Mirror of shaders/sph/dfsph_check.comp: same names, same statement order, same step labels. The
+shader's barrier splits it into two phases, so this mirror is launched by its own `launch`, not by
+sphcore.workgroups.launcher: per work group one local loop over the invocations per phase, with the
+group's shared array as scratch (STYLE.md). Its float32 arithmetic is numpy's, in the shader's order.
+"""
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES,
+                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, HISTORY_COLUMNS,
+                               HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE, SOLVE_DENSITY,
+                               SOLVE_DIVERGENCE, STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE)
+
+f32 = np.float32
+
+
+@lru_cache(maxsize=None)
+def dfsph_check(spec, real=np.float32):
+
+    @njit
+    def dfsph_check_stopped(params, dfsph_control):
+        # [1] the solve; nothing once it has stopped (the flag is the same for every invocation)
+        return dfsph_control[CONTROL_DONE + int(params[0].level)] != 0
+
+    @njit
+    def dfsph_check_share(lid, local_size, params, particle_residual, s_sum):
+        P = params[0]
+        # [2] each invocation sums the residuals lid, lid + L, lid + 2 L, ... in index order
+        total = real(0.0)
+        for k in range(lid, int(P.n), local_size):
+            total += particle_residual[k]
+        s_sum[lid] = total
+
+    @njit
+    def dfsph_check_decide(local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum):
+        P = params[0]
+        solve = int(P.level)
+        # [3] invocation 0: the shares in order, their mean: the error (divergence-free: times dt, the last
+        #     step's, or P.dt before the first)
+        total = real(0.0)
+        for k in range(local_size):
+            total += s_sum[k]
+        error = f32(total / real(P.n))
+        if solve == SOLVE_DIVERGENCE:
+            error *= time_state[0, 0] if time_state[0, 0] > f32(0.0) else P.dt
+        # [4] stop: converged after the minimum iterations, or the budget spent
+        iterations = dfsph_control[CONTROL_ITERATIONS + solve]
+        least = MIN_ITERATIONS_DENSITY if solve == SOLVE_DENSITY else MIN_ITERATIONS_DIVERGENCE
+        converged = iterations >= least and error <= dfsph_state[STATE_TOLERANCE + solve]
+        if not converged and iterations < dfsph_control[CONTROL_MAX_ITERATIONS]:
+            return
+        dfsph_control[CONTROL_DONE + solve] = 1
+        dfsph_state[STATE_ERROR + solve] = error
+        # [5] a solve that spent its budget unconverged: counted, the first one recorded
+        if not converged:
+            dfsph_control[CONTROL_FAILURES] += 1
+            if dfsph_control[CONTROL_FAILURES] == 1:
+                dfsph_control[CONTROL_FAILED_STEP] = dfsph_control[CONTROL_STEP] + 1
+                dfsph_control[CONTROL_FAILED_SOLVE] = solve
+                dfsph_state[STATE_FAILED_ERROR] = error
+        # [6] the constant-density solve ends the step: its history row, the step count
+        if solve != SOLVE_DENSITY:
+            return
+        step = dfsph_control[CONTROL_STEP] + 1
+        row = (step - 1) % HISTORY_ROWS
+        divergence_error = dfsph_state[STATE_ERROR + SOLVE_DIVERGENCE]
+        both = converged and divergence_error <= dfsph_state[STATE_TOLERANCE + SOLVE_DIVERGENCE]
+        dfsph_history[row, 0] = f32(step)
+        dfsph_history[row, 1] = time_state[0, 0]
+        dfsph_history[row, 2] = time_state[0, 2] + time_state[0, 3]
+        dfsph_history[row, 3] = f32(dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE])
+        dfsph_history[row, 4] = divergence_error
+        dfsph_history[row, 5] = f32(iterations)
+        dfsph_history[row, 6] = error
+        dfsph_history[row, 7] = f32(1.0) if both else f32(0.0)
+        dfsph_control[CONTROL_STEP] = step
+
+    @njit(error_model="numpy")
+    def launch(n_groups, local_size, params, time_state, particle_residual, dfsph_control, dfsph_state,
+               dfsph_history):
+        for group in range(n_groups):
+            if dfsph_check_stopped(params, dfsph_control):
+                return
+            s_sum = np.empty(local_size, real)  # the group's shared memory
+            for lid in range(local_size):
+                dfsph_check_share(lid, local_size, params, particle_residual, s_sum)
+            # (barrier)
+            dfsph_check_decide(local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum)
+
+    return launch

@@ -1,0 +1,115 @@
+"""DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11), one invocation per particle, after
+compute_density; invocation 0 also starts the step's two solves (dfsph.py), and every particle's
+pressure starts from 0.
+
+Mirror of shaders/sph/dfsph_factor.comp: same names, same statement order, same step labels.
+A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
+"""
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from sphcore.sph.cells import cells
+from sphcore.sph.dfsph import CONTROL_DONE, CONTROL_ITERATIONS, SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START
+from sphcore.sph.kernels import kernels
+from sphcore.sph.obstacles import obstacles
+from sphcore.workgroups import launcher
+
+
+@lru_cache(maxsize=None)
+def dfsph_factor(spec, real=np.float32):
+    GRID = spec.GRID
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    OBSTACLES = spec.OBSTACLES
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+
+    @njit
+    def dfsph_factor_main(i, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
+                          particle_alpha, dfsph_control, particle_kappa):
+        P = params[0]
+        # [1] one invocation per particle; invocation 0 also starts the step's solves
+        if i >= P.n:
+            return
+        if i == 0:
+            dfsph_control[CONTROL_DONE + SOLVE_DIVERGENCE] = 0
+            dfsph_control[CONTROL_DONE + SOLVE_DENSITY] = 0
+            dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0
+            dfsph_control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0
+        # [2] own position; wall and obstacle images as in compute_density
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
+        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        # [3] sums over every other particle and every image within h of g = V grad_i W_ij = -coef
+        #     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2
+        coef = real(P.pressure_coef) / real(P.rest_density)
+        sum_grad_x = real(0.0)
+        sum_grad_y = real(0.0)
+        sum_grad_z = real(0.0)
+        sum_grad2 = real(0.0)
+        for image in range(8):
+            if (image & ~mirrored) != 0:
+                continue
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
+            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # [4] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            for k in range(range_count()):
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                    if not inside:
+                        continue
+                    start = int(cell_start[first])
+                    end = int(cell_start[last]) + int(cell_pyramid[last])
+                for j in range(start, end):
+                    if j == i and image == 0:
+                        continue
+                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
+                                           wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if r2 >= P.h2:
+                        continue
+                    rlen = np.sqrt(r2)
+                    # [5] direction from the neighbour to i, as in compute_forces (coincident: an image
+                    #     along its plane's inward normal, two particles along x, antisymmetrically)
+                    r_hat_x = real(-1.0) if i < j else real(1.0)
+                    r_hat_y = real(0.0)
+                    r_hat_z = real(0.0)
+                    if fx:
+                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
+                    if fy:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
+                    if fz:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
+                    if rlen > real(0.0):
+                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    g = coef * kernel_gradient(P, r2, rlen)
+                    sum_grad_x -= g * r_hat_x
+                    sum_grad_y -= g * r_hat_y
+                    sum_grad_z -= g * r_hat_z
+                    sum_grad2 += g * g
+        # [6] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
+        s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
+        alpha = real(0.0)
+        if s > real(1e-6) / real(P.h2):
+            alpha = real(1.0) / s
+        # [7] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
+        #     (dfsph_velocity accumulates both)
+        particle_alpha[i] = alpha
+        particle_p[i] = real(0.0)
+        particle_kappa[i] = real(WARM_START) * particle_kappa[i]
+
+    return launcher(dfsph_factor_main)

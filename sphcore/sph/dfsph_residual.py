@@ -1,0 +1,127 @@
+"""DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
+rate d_i = sum_j V (v_i - v_j) . grad W_ij; divergence-free solve r_i = max(d_i, 0), constant-density
+solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a. Returns at once once the solve
+has stopped.
+
+Mirror of shaders/sph/dfsph_residual.comp: same names, same statement order, same step labels.
+A GLSL vec3 local `v` is `v_x, v_y, v_z` here. Its `launch` returns before the work groups where
+the solve has stopped: every invocation would return at once (the flag is the same for all).
+"""
+from functools import lru_cache
+
+import numpy as np
+from numba import njit, prange
+
+from sphcore.sph.cells import cells
+from sphcore.sph.dfsph import CONTROL_DONE, SOLVE_DENSITY
+from sphcore.sph.kernels import kernels
+from sphcore.sph.obstacles import obstacles
+
+
+@lru_cache(maxsize=None)
+def dfsph_residual(spec, real=np.float32):
+    GRID = spec.GRID
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    OBSTACLES = spec.OBSTACLES
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+
+    @njit
+    def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid, cell_start,
+                            obstacle_box, time_state, particle_residual, dfsph_control):
+        P = params[0]
+        # [1] one invocation per particle; nothing once the solve has stopped
+        if i >= P.n:
+            return
+        solve = int(P.level)
+        if dfsph_control[CONTROL_DONE + solve] != 0:
+            return
+        # [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
+        dt = real(time_state[0, 0])
+        kick = dt if solve == SOLVE_DENSITY else real(0.0)
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
+        vi_x = particle_v[i, 0] + kick * particle_a[i, 0]
+        vi_y = particle_v[i, 1] + kick * particle_a[i, 1]
+        vi_z = particle_v[i, 2] + kick * particle_a[i, 2]
+        # [3] wall and obstacle images as in compute_density
+        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        # [4] d_i over every other particle and every image within h
+        coef = real(P.pressure_coef) / real(P.rest_density)
+        d = real(0.0)
+        for image in range(8):
+            if (image & ~mirrored) != 0:
+                continue
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
+            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            for k in range(range_count()):
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                    if not inside:
+                        continue
+                    start = int(cell_start[first])
+                    end = int(cell_start[last]) + int(cell_pyramid[last])
+                for j in range(start, end):
+                    if j == i and image == 0:
+                        continue
+                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
+                                           wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if r2 >= P.h2:
+                        continue
+                    rlen = np.sqrt(r2)
+                    # [6] direction from the neighbour to i, as in compute_forces
+                    r_hat_x = real(-1.0) if i < j else real(1.0)
+                    r_hat_y = real(0.0)
+                    r_hat_z = real(0.0)
+                    if fx:
+                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
+                    if fy:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
+                    if fz:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
+                    if rlen > real(0.0):
+                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    # [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+                    vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
+                    vj_y = particle_v[j, 1] + kick * particle_a[j, 1]
+                    vj_z = particle_v[j, 2] + kick * particle_a[j, 2]
+                    vk_x = -vj_x if fx else vj_x
+                    vk_y = -vj_y if fy else vj_y
+                    vk_z = -vj_z if fz else vj_z
+                    v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
+                    # [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+                    d -= coef * kernel_gradient(P, r2, rlen) * v_r
+        # [9] the residual: compression only
+        residual = max(d, real(0.0))
+        if solve == SOLVE_DENSITY:
+            residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0))
+        # [10] store
+        particle_residual[i] = residual
+
+    @njit(parallel=True, error_model="numpy")
+    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid,
+               cell_start, obstacle_box, time_state, particle_residual, dfsph_control):
+        if dfsph_control[CONTROL_DONE + int(params[0].level)] != 0:
+            return  # (every invocation would return at [1])
+        for group in prange(n_groups):
+            for lid in range(local_size):
+                dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v, particle_a,
+                                    particle_rho, cell_pyramid, cell_start, obstacle_box, time_state,
+                                    particle_residual, dfsph_control)
+
+    return launch

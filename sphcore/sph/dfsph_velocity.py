@@ -1,0 +1,145 @@
+"""One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
+-sum_j V (s_i + s_j) grad W_ij, s_j = alpha_j r_j (divergence-free) or alpha_j r_j / dt^2 (constant
+density), added to the velocity (divergence-free) or to the acceleration, with the pressure
+accumulated (constant density). Returns at once once the solve has stopped; invocation 0 counts
+the update.
+
+Mirror of shaders/sph/dfsph_velocity.comp: same names, same statement order, same step labels.
+A GLSL vec3 local `v` is `v_x, v_y, v_z` here. Its `launch` returns before the work groups where
+the solve has stopped: every invocation would return at once (the flag is the same for all).
+"""
+from functools import lru_cache
+
+import numpy as np
+from numba import njit, prange
+
+from sphcore.sph.cells import cells
+from sphcore.sph.dfsph import CONTROL_DONE, CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.kernels import kernels
+from sphcore.sph.obstacles import obstacles
+
+
+@lru_cache(maxsize=None)
+def dfsph_velocity(spec, real=np.float32):
+    GRID = spec.GRID
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    OBSTACLES = spec.OBSTACLES
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+
+    @njit
+    def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, cell_pyramid,
+                            cell_start, obstacle_box, time_state, particle_alpha, particle_residual, dfsph_control,
+                            particle_kappa):
+        P = params[0]
+        # [1] one invocation per particle; nothing once the solve has stopped; invocation 0 counts the update
+        if i >= P.n:
+            return
+        solve = int(P.level)
+        warm = solve == SOLVE_WARM_START  # the warm start: always, and not counted
+        if not warm and dfsph_control[CONTROL_DONE + solve] != 0:
+            return
+        if not warm and i == 0:
+            dfsph_control[CONTROL_ITERATIONS + solve] += 1
+        # [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
+        #     start: the stiffness sum, particle_kappa)
+        dt = real(time_state[0, 0])
+        scale = real(1.0) if solve == SOLVE_DIVERGENCE else real(1.0) / (dt * dt)
+        si = particle_kappa[i] if warm else scale * particle_alpha[i] * particle_residual[i]
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
+        # [3] wall and obstacle images as in compute_density
+        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        # [4] the change over every other particle and every image within h
+        coef = real(P.pressure_coef) / real(P.rest_density)
+        change_x = real(0.0)
+        change_y = real(0.0)
+        change_z = real(0.0)
+        for image in range(8):
+            if (image & ~mirrored) != 0:
+                continue
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
+            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            for k in range(range_count()):
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                    if not inside:
+                        continue
+                    start = int(cell_start[first])
+                    end = int(cell_start[last]) + int(cell_pyramid[last])
+                for j in range(start, end):
+                    if j == i and image == 0:
+                        continue
+                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
+                                           wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if r2 >= P.h2:
+                        continue
+                    rlen = np.sqrt(r2)
+                    # [6] direction from the neighbour to i, as in compute_forces
+                    r_hat_x = real(-1.0) if i < j else real(1.0)
+                    r_hat_y = real(0.0)
+                    r_hat_z = real(0.0)
+                    if fx:
+                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
+                    if fy:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
+                    if fz:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
+                    if rlen > real(0.0):
+                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+                    #     compressed neighbourhood
+                    sj = particle_kappa[j] if warm else scale * particle_alpha[j] * particle_residual[j]
+                    t = coef * kernel_gradient(P, r2, rlen) * (si + sj)
+                    change_x += t * r_hat_x
+                    change_y += t * r_hat_y
+                    change_z += t * r_hat_z
+        # [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+        #     (constant density; only the warm start reads the sum of others, and it writes none)
+        if solve == SOLVE_DIVERGENCE:
+            particle_v[i, 0] = particle_v[i, 0] + change_x
+            particle_v[i, 1] = particle_v[i, 1] + change_y
+            particle_v[i, 2] = particle_v[i, 2] + change_z
+            particle_v[i, 3] = real(0.0)
+        else:
+            particle_a[i, 0] = particle_a[i, 0] + change_x
+            particle_a[i, 1] = particle_a[i, 1] + change_y
+            particle_a[i, 2] = particle_a[i, 2] + change_z
+            particle_a[i, 3] = real(0.0)
+            kappa = particle_kappa[i]
+            if not warm:
+                kappa += si
+            if not warm:
+                particle_kappa[i] = kappa
+            rhoi = particle_rho[i]
+            particle_p[i] = kappa * rhoi * rhoi / real(P.rest_density)
+
+    @njit(parallel=True, error_model="numpy")
+    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
+               cell_pyramid, cell_start, obstacle_box, time_state, particle_alpha, particle_residual, dfsph_control,
+               particle_kappa):
+        solve = int(params[0].level)
+        if solve != SOLVE_WARM_START and dfsph_control[CONTROL_DONE + solve] != 0:
+            return  # (every invocation would return at [1])
+        for group in prange(n_groups):
+            for lid in range(local_size):
+                dfsph_velocity_main(group * local_size + lid, params, particle_x, particle_v, particle_a,
+                                    particle_rho, particle_p, cell_pyramid, cell_start, obstacle_box, time_state,
+                                    particle_alpha, particle_residual, dfsph_control, particle_kappa)
+
+    return launch
