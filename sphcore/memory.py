@@ -184,6 +184,7 @@ def check(scene, backend="numba", device_in_host=None):
         spacing = math.ceil(spacing * 1e4) / 1e4 if spacing < 0.1 else math.ceil(spacing * 100) / 100
         what = f"about {fit:,} particles would fit (fluid.spacing = {spacing:g} m or more)"
     else:
-        what = "not even the grid and the kernels fit: free memory, or run on a larger machine"
+        what = ("not even the grid and the kernels fit: raise the limit (ulimit -v)" if "RLIMIT_AS" in where
+                else "not even the grid and the kernels fit: free memory, or run on a larger machine")
     raise MemoryLimitError(f"not enough memory: {n:,} particles ({on}) need about {needed / GiB:.2f} GiB at the "
                            f"peak, {free / GiB:.2f} GiB is available ({where}); {what}")
