@@ -181,7 +181,8 @@ def check(scene, backend="numba", device_in_host=None):
     on = f"{backend}, {scene['physics.precision']}" + (", device memory in host memory" if device_in_host else "")
     if fit > 0:
         spacing = scene["fluid.spacing"] * (n / fit) ** (1.0 / scene.dim)
-        spacing = math.ceil(spacing * 1e4) / 1e4 if spacing < 0.1 else math.ceil(spacing * 100) / 100
+        step = 10.0 ** (math.floor(math.log10(spacing)) - 1)  # rounded up to two significant digits
+        spacing = round(math.ceil(spacing / step) * step, 12)
         what = f"about {fit:,} particles would fit (fluid.spacing = {spacing:g} m or more)"
     else:
         what = ("not even the grid and the kernels fit: raise the limit (ulimit -v)" if "RLIMIT_AS" in where
