@@ -194,10 +194,28 @@ class SnapshotSeries:
         write_vtp(self.out_dir / fname, position, point_data)
         self._entries[fname] = (int(step), float(time))
         self._update_files()
+        self._write_pvd()
+        return self.out_dir / fname
+
+    def truncate(self, step: int) -> None:
+        """Drop the snapshots after `step` from the .pvd, then delete their files (only files named
+        NAME_NNNNNNN.vtp in out_dir): a run resumed from a checkpoint at `step` continues the series
+        from there, and one resumed to fewer steps keeps none of the later ones."""
+        later = [f for f, (s, _) in self._entries.items() if s > step]
+        if not later:
+            return
+        for f in later:
+            del self._entries[f]
+        self._update_files()
+        self._write_pvd()
+        for f in later:
+            if re.fullmatch(rf"{re.escape(self.name)}_\d{{7}}\.vtp", f):
+                (self.out_dir / f).unlink(missing_ok=True)
+
+    def _write_pvd(self):
         root = ET.Element("VTKFile", type="Collection", version="1.0")
         coll = ET.SubElement(root, "Collection")
         for f in self._order:
             ET.SubElement(coll, "DataSet", timestep=repr(self._entries[f][1]), group="", part="0", file=f)
         ET.indent(root)
         atomic_write_bytes(self.pvd_path, ET.tostring(root, encoding="utf-8", xml_declaration=True))
-        return self.out_dir / fname

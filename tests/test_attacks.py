@@ -396,3 +396,19 @@ def test_blow_up_hint_names_the_key_that_sets_dt(tiny):
             state["particle_v"][:] = 50.0  # past twice the sound speed plus free fall: an explosion
             with pytest.raises(SimulationError, match=key):
                 sim.check_energy(state)
+
+
+def test_resume_drops_the_snapshots_past_its_checkpoint(tmp_path, tiny, capsys):
+    """Killed after snapshot 20 but before its checkpoint: resumed from step 10 to 15, the series
+    ends at 15 (the old run's 20 is neither listed nor left)."""
+    out = tmp_path / "run"
+    shutil.copytree(tiny / "run", out)
+    assert main(["run", str(tiny / "tiny.toml"), "--out", str(tmp_path / "ten"), "--steps", "10"]) == 0
+    shutil.copy(tmp_path / "ten" / CHECKPOINT, out / CHECKPOINT)
+    (out / "final.npz").unlink()
+    assert main(["run", "--resume", str(out), "--steps", "15"]) == 0
+    capsys.readouterr()
+    listed = [ds.get("file") for ds in ET.parse(out / "tiny.pvd").getroot().iter("DataSet")]
+    assert listed == [f"tiny_{k:07d}.vtp" for k in (0, 5, 10, 15)]
+    assert sorted(p.name for p in out.glob("*.vtp")) == listed
+    loadable(out)
