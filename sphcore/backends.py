@@ -19,6 +19,7 @@ import numpy as np
 from sphcore.params import MAX_OBSTACLES, SHADER_DIR, pyramid_levels
 from sphcore.sph.apply_order import apply_order
 from sphcore.sph.cell_offsets import cell_offsets
+from sphcore.sph.choose_dt import choose_dt
 from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
@@ -26,6 +27,7 @@ from sphcore.sph.count_cells import count_cells
 from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
 from sphcore.sph.reduce_cells import reduce_cells
+from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.scatter_particles import scatter_particles
 from sphcore.sph.sort_cells import sort_cells
 from sphcore.workgroups import group_count
@@ -54,7 +56,14 @@ BUFFERS = {
     "obstacle_box": (np.float32, 4, 2 * MAX_OBSTACLES),
     "particle_drho": (REAL, 1, "particles"),
     "scratch_rho": (REAL, 1, "particles"),
+    "particle_vh": (REAL, 4, "particles"),
+    "time_state": (np.float32, 4, 1),
+    "dt_partial": (REAL, 2, "particles"),
 }
+# particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
+# time_state: (dt, the last step's dt, time hi, time lo) written on the device by choose_dt (with
+# time.dt = "adaptive" or "verlet"; zero at the start); the time is hi + lo (a compensated float32 sum).
+# dt_partial: reduce_dt's largest (|v|^2, |a|^2) per work group (as many as particles: local size 1).
 # grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
 # [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
@@ -72,15 +81,19 @@ STAGES = {
                                                            "sorted_index")),
     "sort_cells": (sort_cells, "cells", ("cell_pyramid", "cell_start", "sorted_index")),
     "gather_particles": (gather_particles, "particles", ("particle_x", "particle_v", "particle_id", "sorted_index",
-                                                         "scratch_x", "scratch_v", "scratch_id")),
+                                                         "scratch_x", "scratch_v", "scratch_id", "particle_a",
+                                                         "particle_vh")),
     "apply_order": (apply_order, "particles", ("particle_x", "particle_v", "particle_id", "scratch_x",
-                                               "scratch_v", "scratch_id")),
+                                               "scratch_v", "scratch_id", "particle_a", "particle_vh")),
     "compute_density": (compute_density, "particles", ("particle_x", "particle_rho", "particle_p",
                                                        "cell_pyramid", "cell_start", "particle_id",
                                                        "particle_neighbours", "obstacle_box")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "cell_pyramid", "cell_start", "obstacle_box")),
-    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box")),
+    "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
+    "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
+    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
+                                           "time_state")),
 }
 
 Stage = namedtuple("Stage", "name level")  # level: the HistoPyramid level a reduce_cells builds, else 0
@@ -99,8 +112,13 @@ def neighbour_stages(cell_total):
 def plan(scene):
     """The ordered stages one time step of `scene` runs; both backends execute this list with
     the specialization constants `scene.spec` (a disabled term is compiled out of its shader)."""
-    stages = neighbour_stages(int(np.prod(scene.grid_dim))) if scene.spec.GRID else []
-    return stages + [Stage("compute_density"), Stage("compute_forces"), Stage("integrate")]
+    spec = scene.spec
+    stages = neighbour_stages(int(np.prod(scene.grid_dim))) if spec.GRID else []
+    stages += [Stage("compute_density"), Stage("compute_forces")]
+    # the step's dt on the device (time.dt = "adaptive"), and the last step's for Verlet
+    stages += [Stage("reduce_dt")] if spec.ADAPTIVE_DT else []
+    stages += [Stage("choose_dt")] if spec.ADAPTIVE_DT or spec.VERLET else []
+    return stages + [Stage("integrate")]
 
 
 def buffer_dtype(name, precision="float32"):
@@ -169,10 +187,12 @@ def in_particle_order(state, dim=None):
 
 
 def dispatch_size(stage, params):
-    """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds."""
+    """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds (or one)."""
     kind = STAGES[stage.name][1]
     if kind == "particles":
         return int(params[0]["n"])
+    if kind == "one":
+        return 1
     cells = int(params[0]["cell_total"])
     if kind == "cells":
         return cells
@@ -224,6 +244,10 @@ class NumbaBackend:
 
     def read(self):
         return {k: v.copy() for k, v in self.state.items()}
+
+    def read_buffer(self, name):
+        """One buffer's contents (a copy)."""
+        return self.state[name].copy()
 
     def clear_status(self):
         self.state["grid_status"][:] = STATUS_CLEAR
@@ -300,6 +324,10 @@ class VulkanBackend:
 
     def read(self):
         return {name: self.buffers[name].read(self.dtypes[name], self.shapes[name]) for name in BUFFERS}
+
+    def read_buffer(self, name):
+        """One buffer's contents, read back from the device."""
+        return self.buffers[name].read(self.dtypes[name], self.shapes[name])
 
     def clear_status(self):
         self.buffers["grid_status"].write(STATUS_CLEAR)

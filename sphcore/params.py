@@ -97,9 +97,12 @@ def pyramid_levels(cell_total):
 
 
 def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
-                    gravity, box_min, box_max, grid_dim=(1, 1, 1)):
+                    gravity, box_min, box_max, grid_dim=(1, 1, 1), viscosity_model="laminar", alpha=0.0, cfl_number=0.0):
     """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
-    `dim` components are padded with zeros to three."""
+    `dim` components are padded with zeros to three.
+    `viscosity_model` ("laminar" | "artificial"; physics.viscosity_model): laminar takes `viscosity`
+    (mu), artificial `alpha` (fluid.alpha; viscosity_coef = alpha c h, c = sqrt(stiffness));
+    `cfl_number`: 0.25 time.dt_fraction where time.dt = "adaptive" (then `dt` is the largest step)."""
     c = kernel_coefficients(h, dim)
     pad = lambda v: list(v) + [0.0] * (3 - len(v))  # noqa: E731
     params = np.zeros(1, PARAMS_DTYPE)
@@ -110,6 +113,8 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     p["density_coef"] = mass * c["poly6"]
     p["pressure_coef"] = -mass * c["spiky_grad"]
     p["viscosity_coef"] = viscosity * mass * c["visc_lap"]
+    if viscosity_model == "artificial":  # Monaghan 1992's alpha c h (shaders/sph/viscosity.glsl)
+        p["viscosity_coef"] = alpha * math.sqrt(stiffness) * h
     p["cohesion_coef"] = -cohesion * c["poly6"]
     p["rest_density"] = rest_density
     # Tait: B = rho_0 c^2 / 7 gives the linear law's sound speed c = sqrt(k) at rho_0
@@ -123,6 +128,7 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     p["grid_dim"] = grid_dim
     p["cell_total"] = int(np.prod(grid_dim))
     p["levels"] = pyramid_levels(int(np.prod(grid_dim)))[0]
+    p["cfl_number"] = cfl_number
     return params
 
 

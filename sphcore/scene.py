@@ -50,14 +50,15 @@ def read_limited(path, limit=MAX_SCENE_BYTES):
 def stable_dt(scene, max_speed=0.0):
     """Largest stable time step [s] and the bound that sets it.
 
-    CFL: 0.25 h / (c + |v|max), c = sqrt(k); viscous: 0.125 h^2 rho_0 / mu; body force:
+    CFL: 0.25 h / (c + |v|max), c = sqrt(k); viscous: 0.125 h^2 rho_0 / mu (mu: Scene.shear_viscosity); body force:
     0.25 sqrt(h / |g|) (Monaghan 1992; Morris et al. 1997). Terms switched off in physics.* do
     not bound it.
     """
     h = scene.h
     bounds = {"CFL": 0.25 * h / (math.sqrt(scene["fluid.stiffness"]) + max_speed)}
-    if scene["fluid.viscosity"] > 0 and scene["physics.viscosity"]:
-        bounds["viscous"] = 0.125 * h * h * scene["fluid.rest_density"] / scene["fluid.viscosity"]
+    mu = scene.shear_viscosity
+    if mu > 0 and scene["physics.viscosity"]:
+        bounds["viscous"] = 0.125 * h * h * scene["fluid.rest_density"] / mu
     g = math.sqrt(sum(c * c for c in scene["forces.gravity"]))
     if g > 0 and scene["physics.gravity"]:
         bounds["force"] = 0.25 * math.sqrt(h / g)
@@ -93,6 +94,10 @@ SCHEMA = {
         "gravity": Key(True, "", 0, 0, "the gravity term (vector forces.gravity)", "bool"),
         "precision": Key("float32", "", 0, 0, "float32, or float64 particle buffers and arithmetic (the "
                          "Vulkan device must support shaderFloat64)", "float32|float64"),
+        "viscosity_model": Key("laminar", "", 0, 0, "laminar: mu sum_j m (v_j - v_i) L_ij / (rho_i rho_j) (Mueller et al. "
+                               "2003), coefficient fluid.viscosity; artificial: Monaghan 1992's Pi_ij = -alpha c h "
+                               "(v_ij . r_ij) / (rho_ij (r^2 + 0.01 h^2)) for approaching pairs, coefficient fluid.alpha",
+                               "laminar|artificial"),
     },
     "domain": {
         "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls (open: origin of the hashed grid)", "vec"),
@@ -102,6 +107,9 @@ SCHEMA = {
         "obstacles": Key([], "m", -1e3, 1e3, "solid boxes inside the domain that the fluid flows around (images "
                          f"across their faces, as at the walls): [{{min = [...], max = [...]}}], at most {MAX_OBSTACLES}",
                          "boxes"),
+        "wall_model": Key("free_slip", "", 0, 0, "velocity of the walls' and obstacles' mirror images: free_slip "
+                          "reverses its normal component (no shear), no_slip all of it (the fluid is dragged)",
+                          "free_slip|no_slip"),
     },
     "fluid": {
         "blocks": Key([{"min": [0.1, 0.1], "max": [0.4, 0.4]}], "m", -1e3, 1e3,
@@ -114,6 +122,8 @@ SCHEMA = {
                          "k = c^2 for a speed of sound c (about 10x the fastest flow); linear and Tait alike"),
         "viscosity": Key(1.0, "Pa s", 0.0, 1e5, "dynamic viscosity mu of Mueller's viscosity term"),
         "cohesion": Key(0.0, "m^dim/s^2", 0.0, 1e6, "kappa of the cohesion force -kappa sum_j W(r_ij) (x_i - x_j)"),
+        "alpha": Key(0.02, "-", 0.0, 10.0, 'alpha of physics.viscosity_model = "artificial" (Monaghan 1992), with '
+                     "c = sqrt(stiffness); its shear viscosity is mu = alpha rho_0 c h / (2 dim + 4)"),
     },
     "forces": {
         "gravity": Key([0.0, -9.81], "m/s^2", -1e4, 1e4, "gravitational acceleration", "vec"),
@@ -123,8 +133,12 @@ SCHEMA = {
     },
     "time": {
         "dt": Key(1e-4, "s", 1e-8, 1.0, 'time step, or "auto": dt_fraction times the stability bound '
-                  "(CFL, viscous, body force; see stable_dt)", "dt"),
-        "dt_fraction": Key(1.0, "-", 0.01, 10.0, 'fraction of the stability bound taken by dt = "auto"'),
+                  '(CFL, viscous, body force; see stable_dt), or "adaptive": that bound computed on the device '
+                  "every step from the fastest particle and the largest acceleration", "dt"),
+        "dt_fraction": Key(1.0, "-", 0.01, 10.0, 'fraction of the stability bound taken by dt = "auto" or "adaptive"'),
+        "integrator": Key("symplectic_euler", "", 0, 0, "symplectic_euler: v += dt a, x += dt v (first order); verlet: "
+                          "kick-drift-kick leapfrog, one force evaluation per step (second order)",
+                          "symplectic_euler|verlet"),
         "steps": Key(5000, "steps", 1, 1e9, "steps to run unless --steps is given", "int"),
         "output_every": Key(250, "steps", 1, 1e9, "steps between snapshots", "int"),
         "checkpoint_every": Key(1000, "steps", 1, 1e9, "steps between checkpoints (what `sphcore run --resume` "
@@ -160,7 +174,7 @@ def _check(where, key, value):
         if value not in key.kind.split("|"):
             raise SceneError(f"{where} = {_shown(value)}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
         return value
-    if key.kind == "dt" and value == "auto":
+    if key.kind == "dt" and value in ("auto", "adaptive"):
         return value
     if key.kind == "bool":
         if not isinstance(value, bool):
@@ -171,7 +185,7 @@ def _check(where, key, value):
             raise SceneError(f"{where}: expected an integer ({key.unit}), got {_shown(value)}")
     elif key.kind in ("float", "dt"):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            expected = 'a number or "auto"' if key.kind == "dt" else "a number"
+            expected = 'a number, "auto" or "adaptive"' if key.kind == "dt" else "a number"
             raise SceneError(f"{where}: expected {expected} ({key.unit}), got {_shown(value)}")
         if isinstance(value, int) and not key.low <= value <= key.high:  # before float() overflows
             raise SceneError(f"{where} = {_shown(value)}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
@@ -272,9 +286,33 @@ class Scene:
     @property
     def dt(self):
         """The time step [s]: time.dt, or time.dt_fraction of the stability bound where it is "auto"."""
-        if self["time.dt"] == "auto":
+        if self["time.dt"] in ("auto", "adaptive"):  # adaptive: the estimate; the device sets each step's
             return self["time.dt_fraction"] * stable_dt(self, self.speed_estimate())[0]
         return self["time.dt"]
+
+    @property
+    def shear_viscosity(self):
+        """mu [Pa s]: fluid.viscosity, or for the artificial viscosity its shear viscosity alpha rho_0 c h
+        / (2 dim + 4) (Monaghan 2005, sec. 4.6)."""
+        if self["physics.viscosity_model"] == "artificial":
+            return (self["fluid.alpha"] * self["fluid.rest_density"] * math.sqrt(self["fluid.stiffness"]) * self.h
+                    / (2 * self.dim + 4))
+        return self["fluid.viscosity"]
+
+    @property
+    def adaptive_dt(self):
+        """Whether each step's dt is computed on the device (time.dt = "adaptive")."""
+        return self["time.dt"] == "adaptive"
+
+    def _folded_dt(self):
+        """P.dt: the time step, or where it is adaptive the largest one, dt_fraction times the viscous
+        bound (1 s without viscosity): the state-dependent bounds are the device's (choose_dt.comp)."""
+        if not self.adaptive_dt:
+            return self.dt
+        mu = self.shear_viscosity
+        if mu > 0 and self["physics.viscosity"]:
+            return self["time.dt_fraction"] * 0.125 * self.h ** 2 * self["fluid.rest_density"] / mu
+        return 1.0
 
     def speed_estimate(self):
         """The fastest flow to expect [m/s]: free fall from the top of the fluid to the floor,
@@ -420,16 +458,21 @@ class Scene:
         return Spec(DIM=self.dim, GRID=physics["neighbour_search"] == "grid",
                     WALLS=self["domain.boundary"] == "walls", TAIT=physics["equation_of_state"] == "tait",
                     VISCOSITY=physics["viscosity"], SURFACE_TENSION=physics["surface_tension"],
-                    GRAVITY=physics["gravity"], NEIGHBOUR_STATS=False, OBSTACLES=len(self["domain.obstacles"]))
+                    GRAVITY=physics["gravity"], NEIGHBOUR_STATS=False, OBSTACLES=len(self["domain.obstacles"]),
+                    VISCOSITY_MODEL=("laminar", "artificial").index(physics["viscosity_model"]),
+                    NO_SLIP=self["domain.wall_model"] == "no_slip", VERLET=self["time.integrator"] == "verlet",
+                    ADAPTIVE_DT=self.adaptive_dt)
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""
         return fold_parameters(
             n=n, dim=self.dim, h=self.h, mass=self.mass, rest_density=self["fluid.rest_density"],
             stiffness=self["fluid.stiffness"], tait=self["physics.equation_of_state"] == "tait",
-            viscosity=self["fluid.viscosity"], cohesion=self["fluid.cohesion"], dt=self.dt,
+            viscosity=self["fluid.viscosity"], cohesion=self["fluid.cohesion"], dt=self._folded_dt(),
             restitution=self["walls.restitution"], gravity=self["forces.gravity"],
-            box_min=self["domain.box_min"], box_max=self["domain.box_max"], grid_dim=self.grid_dim)
+            box_min=self["domain.box_min"], box_max=self["domain.box_max"], grid_dim=self.grid_dim,
+            viscosity_model=self["physics.viscosity_model"], alpha=self["fluid.alpha"],
+            cfl_number=0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0)
 
     def to_json(self):
         return json.dumps(self.config, sort_keys=True)

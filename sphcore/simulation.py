@@ -35,7 +35,8 @@ class CheckpointError(SimulationError):
 CHECKPOINT = "checkpoint.npz"
 # The buffers that carry the state from one step to the next (and the outputs of the last one);
 # every other buffer is rewritten by each step before any stage reads it.
-CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p", "particle_id", "grid_status")
+CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p", "particle_id", "grid_status",
+           "particle_vh", "time_state")  # Verlet's half-step velocity; dt, the last dt and the time (adaptive dt)
 
 
 class Simulation:
@@ -82,12 +83,26 @@ class Simulation:
     def compute_densities(self):
         """Density and pressure of the current positions (a step without its forces and motion)."""
         for stage in self.stages:
-            if stage.name not in ("compute_forces", "integrate"):
+            if stage.name not in ("compute_forces", "reduce_dt", "choose_dt", "integrate"):
                 self.backend.run_stage(stage)
 
     @property
     def time(self):
+        """The simulated time [s]: steps times dt, or with time.dt = "adaptive" the sum of the steps' dts,
+        kept on the device (time_state: a compensated float32 pair, read here, never per step)."""
+        if self.scene.adaptive_dt:
+            state = self.backend.read_buffer("time_state")[0]
+            return float(state[2]) + float(state[3])
         return self.step_count * float(self.params[0]["dt"])
+
+    @property
+    def dt(self):
+        """The last step's dt [s]: time.dt, or the device's where it is adaptive (before the first step,
+        the scene's estimate)."""
+        if self.scene.adaptive_dt:
+            dt = float(self.backend.read_buffer("time_state")[0][0])
+            return dt if dt > 0 else self.scene.dt
+        return float(self.params[0]["dt"])
 
     def advance(self, steps):
         self.backend.step(steps)
@@ -310,6 +325,7 @@ def final_arrays(sim, state):
         "pressure": state["particle_p"],
         "step": np.int64(sim.step_count),
         "time": np.float64(sim.time),
+        "dt": np.float64(sim.dt),
         "scene": np.array(sim.scene.to_json()),
         "mass": np.float64(sim.scene.mass),
         "h": np.float64(sim.scene.h),
@@ -384,7 +400,6 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
             if checkpoint is not None:
                 sim.restore(checkpoint)
                 saved = sim.step_count
-                series.truncate(sim.step_count)  # snapshots past the checkpoint: of steps that will run again
                 note_resume(checkpoint, sim, out_dir)
             state = sim.read()
             if checkpoint is None:

@@ -15,6 +15,8 @@ layout(std430, binding = 5) writeonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };
 layout(std430, binding = 12) readonly buffer ScratchV { real4 scratch_v[]; };
 layout(std430, binding = 13) readonly buffer ScratchId { uint scratch_id[]; };
+layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 19) writeonly buffer ParticleVh { real4 particle_vh[]; };
 
 void main() {
     // [1] one invocation per particle
@@ -24,4 +26,6 @@ void main() {
     particle_x[k] = scratch_x[k];
     particle_v[k] = scratch_v[k];
     particle_id[k] = scratch_id[k];
+    // [3] Verlet's half-step velocity, back from its scratch (gather_particles.comp)
+    if (VERLET) particle_vh[k] = particle_a[k];
 }

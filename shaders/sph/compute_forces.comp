@@ -13,6 +13,8 @@ layout(local_size_x_id = 0) in;
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
+#include "walls.glsl"
+#include "viscosity.glsl"
 
 layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
@@ -86,15 +88,12 @@ void main() {
                 //     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
                 real fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr;
                 f_pressure += fp * r_hat;
-                // [8] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc; an image's velocity is
-                //     mirrored on its flipped axes
+                // [8] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
+                //     artificial, Monaghan 1992); an image's velocity is the wall model's (walls.glsl:
+                //     free slip reverses its normal component, no slip all of it)
                 if (VISCOSITY) {
-                    real3 vj = particle_v[j].xyz;
-                    real vk_x = fx ? -vj.x : vj.x;
-                    real vk_y = fy ? -vj.y : vj.y;
-                    real vk_z = fz ? -vj.z : vj.z;
-                    real fv = P.viscosity_coef / rhoj * hr;
-                    f_viscosity += fv * real3(vk_x - vi.x, vk_y - vi.y, vk_z - vi.z);
+                    real3 vk = image_velocity(particle_v[j].xyz, image);
+                    f_viscosity += viscous_term(vi, vk, r, r2, rhoi, rhoj, hr * hr, hr, r_hat);
                 }
                 // [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
                 //     particles only: the walls are not wetted
@@ -105,9 +104,10 @@ void main() {
             }
         }
     }
-    // [10] a_i = f_pressure + f_viscosity / rho_i + cohesion + g (f_pressure is per unit mass)
+    // [10] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
+    //      laminar sum is divided by rho_i, viscosity.glsl)
     real3 a = f_pressure;
-    if (VISCOSITY) a += f_viscosity / rhoi;
+    if (VISCOSITY) a += viscous_acceleration(f_viscosity, rhoi);
     if (SURFACE_TENSION) a += P.cohesion_coef * f_cohesion;
     if (GRAVITY) a += P.gravity;
     // [11] store

@@ -15,6 +15,8 @@ layout(std430, binding = 10) readonly buffer SortedIndex { uint sorted_index[]; 
 layout(std430, binding = 11) writeonly buffer ScratchX { real4 scratch_x[]; };
 layout(std430, binding = 12) writeonly buffer ScratchV { real4 scratch_v[]; };
 layout(std430, binding = 13) writeonly buffer ScratchId { uint scratch_id[]; };
+layout(std430, binding = 2) writeonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 19) readonly buffer ParticleVh { real4 particle_vh[]; };
 
 void main() {
     // [1] one invocation per sorted position
@@ -25,4 +27,7 @@ void main() {
     scratch_x[k] = particle_x[j];
     scratch_v[k] = particle_v[j];
     scratch_id[k] = particle_id[j];
+    // [3] Verlet's half-step velocity (integrators.glsl) travels too, with particle_a as its scratch:
+    //     nothing reads the acceleration before compute_forces rewrites it
+    if (VERLET) particle_a[k] = particle_vh[j];
 }

@@ -1,25 +1,34 @@
 #version 460
-// Symplectic Euler step, box walls and obstacles, one invocation per particle.
+// Time step (integrators.glsl: symplectic Euler or the kick-drift-kick Verlet leapfrog), box walls and
+// obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt.comp wrote
+// into time_state on the device this step (no readback).
 // Mirror: sphcore/sph/integrate.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "real.glsl"
+#include "integrators.glsl"
 
 layout(std430, binding = 0) buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+layout(std430, binding = 19) buffer ParticleVh { real4 particle_vh[]; };
+layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
-    // [2] symplectic Euler: v += dt a, then x += dt v
-    real3 v = particle_v[i].xyz + P.dt * particle_a[i].xyz;
-    real3 x = particle_x[i].xyz + P.dt * v;
-    // [3] walls: each axis is tested on its own (no else-if), so a particle past a corner is
+    // [2] the step's dt: P.dt, or the device's (time_state: dt, the last step's dt, time; choose_dt.comp)
+    float dt = ADAPTIVE_DT ? time_state[0].x : P.dt;
+    float dt_prev = VERLET ? time_state[0].y : 0.0;
+    // [3] kick and drift (integrators.glsl): v is the velocity that moves the particle over the step
+    real3 a = particle_a[i].xyz;
+    real3 v = drift_velocity(particle_v[i].xyz, particle_vh[i].xyz, a, dt, dt_prev);
+    real3 x = particle_x[i].xyz + dt * v;
+    // [4] walls: each axis is tested on its own (no else-if), so a particle past a corner is
     //     put back on every wall it crossed in the same step. Clamp the position; an outward
     //     normal speed is reversed and scaled by the restitution, an inward one is kept.
     if (WALLS) {
@@ -30,7 +39,7 @@ void main() {
         if (DIM == 3u && x.z < P.box_min.z) { x.z = P.box_min.z; v.z = max(v.z, -P.restitution * v.z); }
         if (DIM == 3u && x.z > P.box_max.z) { x.z = P.box_max.z; v.z = min(v.z, -P.restitution * v.z); }
     }
-    // [4] obstacles (shaders/sph/obstacles.glsl): a particle that ended the step inside a box is put
+    // [5] obstacles (shaders/sph/obstacles.glsl): a particle that ended the step inside a box is put
     //     back onto the box's face nearest to it, its normal speed there treated as at a wall. The
     //     images across the faces keep particles off them; this catches the rare one that got in.
     for (uint o = 0u; o < OBSTACLES; ++o) {
@@ -52,7 +61,8 @@ void main() {
             v.z = lower ? min(v.z, -P.restitution * v.z) : max(v.z, -P.restitution * v.z);
         }
     }
-    // [5] store
+    // [6] store: the position, the velocity the integrator stores (integrators.glsl) and Verlet's half step's
     particle_x[i] = real4(x, 0.0);
-    particle_v[i] = real4(v, 0.0);
+    particle_v[i] = real4(stored_velocity(v, a, dt), 0.0);
+    if (VERLET) particle_vh[i] = real4(v, 0.0);
 }

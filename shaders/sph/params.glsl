@@ -10,10 +10,11 @@ layout(push_constant) uniform Params {
     float density_coef;   // m W_poly6's coefficient: 2D m 4/(pi h^8), 3D m 315/(64 pi h^9)
     float pressure_coef;  // minus m times grad W_spiky's coefficient: 2D m 30/(pi h^5), 3D m 45/(pi h^6)
     float viscosity_coef; // mu m lap W_visc's coefficient: 2D mu m 40/(pi h^5), 3D mu m 45/(pi h^6)
+                          // (VISCOSITY_MODEL 1, artificial: alpha c h [m^2/s], viscosity.glsl)
     float cohesion_coef;  // kappa times W_poly6's coefficient (surface tension by cohesion)
     float rest_density;   // rho_0 [kg/m^3] (2D: kg/m^2)
     float stiffness;      // linear: k in p = k (rho - rho_0); Tait: B in p = B ((rho/rho_0)^7 - 1)
-    float dt;             // time step [s]
+    float dt;             // time step [s]; with ADAPTIVE_DT the largest allowed (the viscous bound)
     float restitution;    // fraction of the normal speed kept on a wall bounce [-]
     float inv_cell;       // 1 / cell size of the neighbour grid [1/m]
     vec3 gravity;         // [m/s^2]
@@ -25,4 +26,6 @@ layout(push_constant) uniform Params {
     uvec3 grid_dim;       // cells per axis (the hash period per axis in an open domain)
     // -- density and kernels (issue 12: physics.kernel, physics.density, physics.density_diffusion)
     // -- forces, walls and time stepping (issue 12: viscosity_model, wall_model, integrator, dt)
+    float cfl_number;     // time.dt = "adaptive": time.dt_fraction * 0.25, dt = cfl_number min(h / (c + |v|max),
+                          // sqrt(h / |a|max)), c^2 = k (choose_dt.comp)
 } P;

@@ -14,8 +14,11 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def apply_order(spec, real=np.float32):
+    VERLET = spec.VERLET
+
     @njit
-    def apply_order_main(k, params, particle_x, particle_v, particle_id, scratch_x, scratch_v, scratch_id):
+    def apply_order_main(k, params, particle_x, particle_v, particle_id, scratch_x, scratch_v, scratch_id,
+                         particle_a, particle_vh):
         P = params[0]
         # [1] one invocation per particle
         if k >= P.n:
@@ -24,5 +27,9 @@ def apply_order(spec, real=np.float32):
         particle_x[k, :] = scratch_x[k, :]
         particle_v[k, :] = scratch_v[k, :]
         particle_id[k] = scratch_id[k]
+        # [3] Verlet's half-step velocity, back from its scratch (gather_particles.comp)
+        if VERLET:
+            particle_vh[k, :] = particle_a[k, :]
+
 
     return launcher(apply_order_main)

@@ -13,6 +13,8 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.viscosity import viscosity
+from sphcore.sph.walls import walls
 from sphcore.workgroups import launcher
 
 
@@ -24,6 +26,8 @@ def compute_forces(spec, real=np.float32):
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
+    image_velocity = walls(spec, real)[2]
+    viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
@@ -115,19 +119,16 @@ def compute_forces(spec, real=np.float32):
                     f_pressure_x += fp * r_hat_x
                     f_pressure_y += fp * r_hat_y
                     f_pressure_z += fp * r_hat_z
-                    # [8] viscosity: mu sum_j m (v_j - v_i) / rho_j lap W_visc; an image's velocity is
-                    #     mirrored on its flipped axes
+                    # [8] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
+                    #     artificial, Monaghan 1992); an image's velocity is the wall model's (walls.glsl:
+                    #     free slip reverses its normal component, no slip all of it)
                     if VISCOSITY:
-                        vj_x = particle_v[j, 0]
-                        vj_y = particle_v[j, 1]
-                        vj_z = particle_v[j, 2]
-                        vk_x = -vj_x if fx else vj_x
-                        vk_y = -vj_y if fy else vj_y
-                        vk_z = -vj_z if fz else vj_z
-                        fv = P.viscosity_coef / rhoj * hr
-                        f_viscosity_x += fv * (vk_x - vi_x)
-                        f_viscosity_y += fv * (vk_y - vi_y)
-                        f_viscosity_z += fv * (vk_z - vi_z)
+                        vk_x, vk_y, vk_z = image_velocity(particle_v[j, 0], particle_v[j, 1], particle_v[j, 2], image)
+                        t_x, t_y, t_z = viscous_term(P, vi_x, vi_y, vi_z, vk_x, vk_y, vk_z, r_x, r_y, r_z, r2, rhoi,
+                                                     rhoj, hr * hr, hr, r_hat_x, r_hat_y, r_hat_z)
+                        f_viscosity_x += t_x
+                        f_viscosity_y += t_y
+                        f_viscosity_z += t_z
                     # [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
                     #     particles only: the walls are not wetted
                     if SURFACE_TENSION and image == 0:
@@ -135,14 +136,16 @@ def compute_forces(spec, real=np.float32):
                         f_cohesion_x += q * q * q * r_x
                         f_cohesion_y += q * q * q * r_y
                         f_cohesion_z += q * q * q * r_z
-        # [10] a_i = f_pressure + f_viscosity / rho_i + cohesion + g (f_pressure is per unit mass)
+        # [10] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
+        #      laminar sum is divided by rho_i, viscosity.glsl)
         a_x = f_pressure_x
         a_y = f_pressure_y
         a_z = f_pressure_z
         if VISCOSITY:
-            a_x += f_viscosity_x / rhoi
-            a_y += f_viscosity_y / rhoi
-            a_z += f_viscosity_z / rhoi
+            t_x, t_y, t_z = viscous_acceleration(f_viscosity_x, f_viscosity_y, f_viscosity_z, rhoi)
+            a_x += t_x
+            a_y += t_y
+            a_z += t_z
         if SURFACE_TENSION:
             a_x += P.cohesion_coef * f_cohesion_x
             a_y += P.cohesion_coef * f_cohesion_y

@@ -13,9 +13,11 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def gather_particles(spec, real=np.float32):
+    VERLET = spec.VERLET
+
     @njit
     def gather_particles_main(k, params, particle_x, particle_v, particle_id, sorted_index,
-                              scratch_x, scratch_v, scratch_id):
+                              scratch_x, scratch_v, scratch_id, particle_a, particle_vh):
         P = params[0]
         # [1] one invocation per sorted position
         if k >= P.n:
@@ -25,5 +27,10 @@ def gather_particles(spec, real=np.float32):
         scratch_x[k, :] = particle_x[j, :]
         scratch_v[k, :] = particle_v[j, :]
         scratch_id[k] = particle_id[j]
+        # [3] Verlet's half-step velocity (integrators.glsl) travels too, with particle_a as its scratch:
+        #     nothing reads the acceleration before compute_forces rewrites it
+        if VERLET:
+            particle_a[k, :] = particle_vh[j, :]
+
 
     return launcher(gather_particles_main)

@@ -1,4 +1,6 @@
-"""Symplectic Euler step, box walls and obstacles, one invocation per particle.
+"""Time step (integrators.py: symplectic Euler or the kick-drift-kick Verlet leapfrog), box walls and
+obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt wrote into
+time_state this step.
 
 Mirror of shaders/sph/integrate.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -8,6 +10,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.integrators import integrators
 from sphcore.workgroups import launcher
 
 
@@ -15,21 +18,26 @@ from sphcore.workgroups import launcher
 @lru_cache(maxsize=None)
 def integrate(spec, real=np.float32):
     DIM, WALLS, OBSTACLES = spec.DIM, spec.WALLS, spec.OBSTACLES
+    VERLET, ADAPTIVE_DT = spec.VERLET, spec.ADAPTIVE_DT
+    drift_velocity, stored_velocity = integrators(spec, real)[2:]
 
     @njit
-    def integrate_main(i, params, particle_x, particle_v, particle_a, obstacle_box):
+    def integrate_main(i, params, particle_x, particle_v, particle_a, obstacle_box, particle_vh, time_state):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
             return
-        # [2] symplectic Euler: v += dt a, then x += dt v
-        v_x = particle_v[i, 0] + P.dt * particle_a[i, 0]
-        v_y = particle_v[i, 1] + P.dt * particle_a[i, 1]
-        v_z = particle_v[i, 2] + P.dt * particle_a[i, 2]
-        x_x = particle_x[i, 0] + P.dt * v_x
-        x_y = particle_x[i, 1] + P.dt * v_y
-        x_z = particle_x[i, 2] + P.dt * v_z
-        # [3] walls: each axis is tested on its own (no else-if), so a particle past a corner is
+        # [2] the step's dt: P.dt, or the device's (time_state: dt, the last step's dt, time; choose_dt.comp)
+        dt = time_state[0, 0] if ADAPTIVE_DT else P.dt
+        dt_prev = time_state[0, 1] if VERLET else np.float32(0.0)
+        # [3] kick and drift (integrators.glsl): v is the velocity that moves the particle over the step
+        a_x, a_y, a_z = particle_a[i, 0], particle_a[i, 1], particle_a[i, 2]
+        v_x, v_y, v_z = drift_velocity(particle_v[i, 0], particle_v[i, 1], particle_v[i, 2], particle_vh[i, 0],
+                                       particle_vh[i, 1], particle_vh[i, 2], a_x, a_y, a_z, dt, dt_prev)
+        x_x = particle_x[i, 0] + dt * v_x
+        x_y = particle_x[i, 1] + dt * v_y
+        x_z = particle_x[i, 2] + dt * v_z
+        # [4] walls: each axis is tested on its own (no else-if), so a particle past a corner is
         #     put back on every wall it crossed in the same step. Clamp the position; an outward
         #     normal speed is reversed and scaled by the restitution, an inward one is kept.
         if WALLS:
@@ -51,7 +59,7 @@ def integrate(spec, real=np.float32):
             if DIM == 3 and x_z > P.box_max[2]:
                 x_z = P.box_max[2]
                 v_z = min(v_z, -P.restitution * v_z)
-        # [4] obstacles (shaders/sph/obstacles.glsl): a particle that ended the step inside a box is put
+        # [5] obstacles (shaders/sph/obstacles.glsl): a particle that ended the step inside a box is put
         #     back onto the box's face nearest to it, its normal speed there treated as at a wall. The
         #     images across the faces keep particles off them; this catches the rare one that got in.
         for o in range(OBSTACLES):
@@ -76,14 +84,19 @@ def integrate(spec, real=np.float32):
                 lower = x_z - lo_z <= hi_z - x_z
                 x_z = lo_z if lower else hi_z
                 v_z = min(v_z, -P.restitution * v_z) if lower else max(v_z, -P.restitution * v_z)
-        # [5] store
+        # [6] store: the position, the velocity the integrator stores (integrators.glsl) and Verlet's half step's
         particle_x[i, 0] = x_x
         particle_x[i, 1] = x_y
         particle_x[i, 2] = x_z
         particle_x[i, 3] = real(0.0)
-        particle_v[i, 0] = v_x
-        particle_v[i, 1] = v_y
-        particle_v[i, 2] = v_z
+        s_x, s_y, s_z = stored_velocity(v_x, v_y, v_z, a_x, a_y, a_z, dt)
+        particle_v[i, 0] = s_x
+        particle_v[i, 1] = s_y
+        particle_v[i, 2] = s_z
         particle_v[i, 3] = real(0.0)
-
+        if VERLET:
+            particle_vh[i, 0] = v_x
+            particle_vh[i, 1] = v_y
+            particle_vh[i, 2] = v_z
+            particle_vh[i, 3] = real(0.0)
     return launcher(integrate_main)
