@@ -400,6 +400,7 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
             if checkpoint is not None:
                 sim.restore(checkpoint)
                 saved = sim.step_count
+                series.truncate(sim.step_count)  # snapshots past the checkpoint: of steps that will run again
                 note_resume(checkpoint, sim, out_dir)
             state = sim.read()
             if checkpoint is None:
