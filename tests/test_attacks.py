@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import vulkan_or_skip
 from sphcore import folder, memory
 from sphcore.cli import main
 from sphcore.scene import Scene, SceneError
@@ -129,30 +130,36 @@ from sphcore import memory
 from sphcore.scene import Scene
 from sphcore.simulation import run
 
+backend, precision = sys.argv[2], sys.argv[3]
+
 def scene(spacing):
-    return Scene.from_dict({"name": "m", "fluid": {"spacing": spacing, "blocks": [{"min": [0, 0], "max": [0.5, 0.5]}]},
+    return Scene.from_dict({"name": "m", "physics": {"precision": precision},
+                            "fluid": {"spacing": spacing, "blocks": [{"min": [0, 0], "max": [0.5, 0.5]}]},
                             "time": {"dt": 1e-5, "output_every": 1, "checkpoint_every": 1}})
 
 def status(field):
     return next(int(l.split()[1]) * 1024 for l in open("/proc/self/status") if l.startswith(field + ":"))
 
 with tempfile.TemporaryDirectory() as tmp:
-    run(scene(0.05), "numba", 1, Path(tmp) / "small", progress=False)  # compiles every kernel
+    run(scene(0.05), backend, 1, Path(tmp) / "small", progress=False)  # compiles every kernel
     open("/proc/self/clear_refs", "w").write("5")  # the peak (VmHWM) starts again from here
     before = status("VmRSS")
     big = scene(float(sys.argv[1]))
-    run(big, "numba", 2, Path(tmp) / "big", progress=False)  # snapshots, checkpoints, final.npz
-    total, terms = memory.estimate(big, "numba")
+    run(big, backend, 2, Path(tmp) / "big", progress=False)  # snapshots, checkpoints, final.npz
+    total, terms = memory.estimate(big, backend, device_in_host=True)  # lavapipe: device memory is host memory
     print(json.dumps({"growth": status("VmHWM") - before, "estimate": total - terms["compiling"]}))
 """
 
 
-def test_estimate_against_the_measured_peak():
+@pytest.mark.parametrize("backend, precision", [("numba", "float32"), ("numba", "float64"), ("vulkan", "float32")])
+def test_estimate_against_the_measured_peak(backend, precision):
     """A 2D run of 250,000 particles after the kernels are compiled: the estimate (less its
     allowance for compiling) is at least the measured growth of the resident set, and at most
     1.5 times it plus 64 MiB: it counts every buffer as resident (untouched zero pages are not)
     and numpy's writer's 16 MiB chunks in full (measured: 1.2 times at 500,000 particles)."""
-    proc = subprocess.run([sys.executable, "-c", MEASURE, "0.001"], capture_output=True, text=True, cwd=ROOT,
+    if backend == "vulkan":
+        vulkan_or_skip()
+    proc = subprocess.run([sys.executable, "-c", MEASURE, "0.001", backend, precision], capture_output=True, text=True, cwd=ROOT,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     got = json.loads(proc.stdout.strip().splitlines()[-1])
