@@ -10,7 +10,10 @@
 //     a_i = -sum_j m Pi_ij grad_i W_ij, Pi_ij = -alpha c h (v_ij . r_ij) / (rho_ij (r^2 + 0.01 h^2))
 //     for approaching pairs (v_ij . r_ij < 0), else 0; rho_ij = (rho_i + rho_j) / 2, alpha c h =
 //     P.viscosity_coef (fluid.alpha, c = sqrt(fluid.stiffness)). Pi_ij is symmetric in (i, j) and
-//     grad_i W_ij antisymmetric, so momentum is conserved pair by pair.
+//     grad_i W_ij antisymmetric, so momentum is conserved pair by pair. h is the kernel's support radius
+//     (as everywhere here): codes whose h is the smoothing length, half the support of Wendland C2
+//     (DualSPHysics, TrixiParticles), get the same Pi_ij with twice our alpha. Its shear viscosity is
+//     nu = alpha c h / (2 dim + 4) (Monaghan 2005), the dam break's laminar mu = alpha rho_0 c h / (2 dim + 4).
 // Mirror: sphcore/sph/viscosity.py (same names, same statements).
 
 #include "real.glsl"
