@@ -172,10 +172,13 @@ def test_unconverged_solve_is_reported_with_step_and_error():
     assert (log[:, 7] == 0).all() and (log[:, 5] == 2).all() and (log[:, 6] > 1e-6).all()
 
 
-def test_resume_is_bitwise_and_the_log_whole(tmp_path):
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_resume_is_bitwise_and_the_log_whole(tmp_path, backend):
+    if backend == "vulkan":
+        vulkan_or_skip()
     scene = scene_of()
-    whole = run(scene, "numba", 24, tmp_path / "whole", progress=False)
-    run(scene, "numba", 16, tmp_path / "part", progress=False)
+    whole = run(scene, backend, 24, tmp_path / "whole", progress=False)
+    run(scene, backend, 16, tmp_path / "part", progress=False)
     from sphcore.simulation import resume
     resumed = resume(tmp_path / "part", steps=24, progress=False)
     for key in ("position", "velocity", "density", "pressure", "solver_log", "time"):

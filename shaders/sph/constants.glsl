@@ -25,3 +25,6 @@ layout(constant_id = 16) const bool NO_SLIP = false;      // wall images reverse
                                                           // normal component only: free slip)
 layout(constant_id = 17) const bool VERLET = false;       // kick-drift-kick (else symplectic Euler)
 layout(constant_id = 18) const bool ADAPTIVE_DT = false;  // dt reduced on the device every step (time_state)
+// Incompressible pressure solver (issue 14): DFSPH (Bender & Koschier 2015, 2017), else the state equation.
+layout(constant_id = 19) const bool DFSPH = false;        // physics.pressure_solver = "dfsph": dfsph_*.comp solve
+                                                          // for the pressure; compute_forces adds no pressure term

@@ -27,7 +27,8 @@ const uint SOLVE_DIVERGENCE = 1u;       // P.level of the divergence-free solve'
 const uint SOLVE_DENSITY = 2u;          // P.level of the constant-density solve's stages
 const uint SOLVE_WARM_START = 3u;       // P.level of dfsph_velocity's warm start of the constant-density solve:
                                         // the acceleration of WARM_START times the last step's stiffness sum
-                                        // (particle_kappa), applied before the first residual
+                                        // (particle_kappa) of the particles a first residual finds compressed
+                                        // (as SPlisHSPlasH's: an expanding region gets none), before the solve
 const float WARM_START = 0.5;           // as SPlisHSPlasH: half the last pressure (a full one overshoots where
                                         // the flow decompresses, and the solve only ever adds pressure)
 

@@ -42,10 +42,11 @@ void main() {
     if (!warm && dfsph_control[CONTROL_DONE + solve] != 0u) return;
     if (!warm && i == 0u) dfsph_control[CONTROL_ITERATIONS + solve] += 1u;
     // [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
-    //     start: the stiffness sum, particle_kappa)
+    //     start: the stiffness sum, particle_kappa, where the particle is compressed: residual > 0)
     real dt = real(time_state[0].x);
     real scale = solve == SOLVE_DIVERGENCE ? real(1.0) : real(1.0) / (dt * dt);
-    real si = warm ? particle_kappa[i] : scale * particle_alpha[i] * particle_residual[i];
+    real si = scale * particle_alpha[i] * particle_residual[i];
+    if (warm) si = particle_residual[i] > real(0.0) ? particle_kappa[i] : real(0.0);
     real3 xi = particle_x[i].xyz;
     // [3] wall and obstacle images as in compute_density
     real3 wall;
@@ -89,7 +90,8 @@ void main() {
                 if (rlen > real(0.0)) r_hat = r / rlen;
                 // [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
                 //     compressed neighbourhood
-                real sj = warm ? particle_kappa[j] : scale * particle_alpha[j] * particle_residual[j];
+                real sj = scale * particle_alpha[j] * particle_residual[j];
+                if (warm) sj = particle_residual[j] > real(0.0) ? particle_kappa[j] : real(0.0);
                 change += (coef * kernel_gradient(r2, rlen) * (si + sj)) * r_hat;
             }
         }
@@ -100,10 +102,10 @@ void main() {
         particle_v[i] = real4(particle_v[i].xyz + change, 0.0);
     } else {
         particle_a[i] = real4(particle_a[i].xyz + change, 0.0);
-        real kappa = particle_kappa[i];
-        if (!warm) kappa += si;
-        if (!warm) particle_kappa[i] = kappa;
         real rhoi = particle_rho[i];
-        particle_p[i] = kappa * rhoi * rhoi / real(P.rest_density);
+        real p = si * rhoi * rhoi / real(P.rest_density);
+        if (!warm) p += particle_p[i];
+        particle_p[i] = p;
+        if (!warm) particle_kappa[i] = p * real(P.rest_density) / (rhoi * rhoi);
     }
 }

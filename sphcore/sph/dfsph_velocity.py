@@ -42,10 +42,12 @@ def dfsph_velocity(spec, real=np.float32):
         if not warm and i == 0:
             dfsph_control[CONTROL_ITERATIONS + solve] += 1
         # [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
-        #     start: the stiffness sum, particle_kappa)
+        #     start: the stiffness sum, particle_kappa, where the particle is compressed: residual > 0)
         dt = real(time_state[0, 0])
         scale = real(1.0) if solve == SOLVE_DIVERGENCE else real(1.0) / (dt * dt)
-        si = particle_kappa[i] if warm else scale * particle_alpha[i] * particle_residual[i]
+        si = scale * particle_alpha[i] * particle_residual[i]
+        if warm:
+            si = particle_kappa[i] if particle_residual[i] > real(0.0) else real(0.0)
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
         xi_z = particle_x[i, 2]
@@ -104,7 +106,9 @@ def dfsph_velocity(spec, real=np.float32):
                         r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
                     # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
                     #     compressed neighbourhood
-                    sj = particle_kappa[j] if warm else scale * particle_alpha[j] * particle_residual[j]
+                    sj = scale * particle_alpha[j] * particle_residual[j]
+                    if warm:
+                        sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
                     t = coef * kernel_gradient(P, r2, rlen) * (si + sj)
                     change_x += t * r_hat_x
                     change_y += t * r_hat_y
@@ -121,13 +125,13 @@ def dfsph_velocity(spec, real=np.float32):
             particle_a[i, 1] = particle_a[i, 1] + change_y
             particle_a[i, 2] = particle_a[i, 2] + change_z
             particle_a[i, 3] = real(0.0)
-            kappa = particle_kappa[i]
-            if not warm:
-                kappa += si
-            if not warm:
-                particle_kappa[i] = kappa
             rhoi = particle_rho[i]
-            particle_p[i] = kappa * rhoi * rhoi / real(P.rest_density)
+            p = si * rhoi * rhoi / real(P.rest_density)
+            if not warm:
+                p += particle_p[i]
+            particle_p[i] = p
+            if not warm:
+                particle_kappa[i] = p * real(P.rest_density) / (rhoi * rhoi)
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, particle_p,

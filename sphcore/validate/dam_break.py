@@ -162,7 +162,7 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
     a, dt = s["a"], dt_estimate(scene)
     every = max(1, round(SAMPLE_DT / math.sqrt(2 * G / a) / dt))
     steps = math.ceil(s["t_end"] / dt)
-    adaptive = scene["time.dt"] == "adaptive"  # the device chooses each step: run to t_end in simulated time
+    adaptive = scene.adaptive_dt  # the device chooses each step (also DFSPH's): run to t_end in simulated time
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     sim = Simulation(scene, s["backend"], **options)
     rows, wall, k_min = [], 0.0, min_neighbours(scene)
@@ -184,6 +184,16 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
         sim.close()
     summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": sim.step_count, "wall_s": wall,
                "min_neighbours": k_min, **errors(rows, s)}
+    t_run = rows[-1]["t"]
+    summary.update(mean_dt=t_run / max(sim.step_count, 1), wall_per_simulated_s=wall / t_run if t_run > 0 else None)
+    if scene.dfsph:  # issue 14: iterations per step and the errors reached (sphcore.pressure_solver's log)
+        log = sim.solver_log.array()
+        summary["dfsph"] = {"divergence_iterations_mean": float(log[:, 3].mean()),
+                            "density_iterations_mean": float(log[:, 5].mean()),
+                            "density_iterations_max": int(log[:, 5].max()),
+                            "density_error_max": float(log[:, 6].max()),
+                            "divergence_error_max": float(log[:, 4].max()),
+                            "unconverged_steps": int((log[:, 7] == 0).sum())}
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)

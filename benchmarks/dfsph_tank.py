@@ -1,0 +1,73 @@
+"""The hydrostatic tank at rest with DFSPH (issue 14): does the density error stay under
+fluid.max_density_error, and what pressure does the solve settle to?
+
+The tank of `sphcore validate tank` (sphcore.validate.tank: 1 m wide, 0.6 m deep) with
+physics.pressure_solver = "dfsph", run for --t-end seconds on --backend. Printed and written as JSON
+(--out): the solver log's errors and iterations per step, the particles' mean compression
+max(rho / rho_0 - 1, 0) at every sample, the speed left, and the pressure slope against rho_0 g.
+
+    .venv/bin/python benchmarks/dfsph_tank.py --resolution 30 --t-end 2 --out /tmp/dfsph_tank.json
+"""
+import argparse
+import json
+import time
+
+import numpy as np
+
+from sphcore.scene import Scene
+from sphcore.simulation import Simulation
+from sphcore.validate.tank import DEPTH, G, tank_scene
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolution", type=int, default=30, help="particles per depth")
+    ap.add_argument("--t-end", type=float, default=2.0)
+    ap.add_argument("--backend", default="numba")
+    ap.add_argument("--max-density-error", type=float, default=0.001)
+    ap.add_argument("--out")
+    args = ap.parse_args()
+    base = tank_scene({"resolution": args.resolution})
+    config = json.loads(base.to_json())
+    config["physics"]["pressure_solver"] = "dfsph"
+    config["fluid"]["max_density_error"] = args.max_density_error
+    config["time"]["dt"] = "auto"
+    scene = Scene.from_dict(config)
+    rho0 = scene["fluid.rest_density"]
+    samples, wall = [], 0.0
+    with Simulation(scene, args.backend) as sim:
+        while sim.time < args.t_end:
+            start = time.perf_counter()
+            sim.advance(20)
+            wall += time.perf_counter() - start
+            s = sim.read()
+            compression = np.maximum(s["particle_rho"] / rho0 - 1.0, 0.0)
+            samples.append((sim.time, float(compression.mean()), float(compression.max()),
+                            float(np.sqrt((s["particle_v"] ** 2).sum(1)).max())))
+        x, p = s["particle_x"], s["particle_p"]
+        surface = x[:, 1].max() + scene["fluid.spacing"] / 2
+        depth = surface - x[:, 1]
+        bulk = (depth > 2 * scene.h) & (depth < DEPTH - 2 * scene.h)
+        slope = float(np.polyfit(depth[bulk], p[bulk], 1)[0] / (rho0 * G))
+        log = sim.solver_log.array()
+        steps, t = sim.step_count, sim.time
+    second = [r for r in samples if r[0] >= args.t_end / 2]
+    result = {
+        "particles": sim.n, "steps": steps, "t": t, "wall_s": wall, "wall_per_simulated_s": wall / t,
+        "mean_dt": t / steps, "max_density_error": args.max_density_error,
+        "solver_density_error_max": float(log[:, 6].max()), "unconverged_steps": int((log[:, 7] == 0).sum()),
+        "density_iterations_mean": float(log[:, 5].mean()), "divergence_iterations_mean": float(log[:, 3].mean()),
+        "mean_compression_max": max(r[1] for r in samples),
+        "mean_compression_second_half_max": max(r[1] for r in second),
+        "largest_compression_second_half": max(r[2] for r in second),
+        "speed_max_second_half": max(r[3] for r in second),
+        "pressure_slope_over_rho0_g": slope,
+    }
+    print(json.dumps(result, indent=1))
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump({**result, "samples": samples}, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
