@@ -27,12 +27,20 @@ def physics_settings(args, keys):
     return {k: v for k, v in vars(args).items() if k in names and v is not None and v is not False}
 
 
+def plotted(plot, rows, summary, path):
+    """plot(rows, summary, path), or why there is no PNG (no matplotlib: the GPU machine)."""
+    try:
+        return plot(rows, summary, path)
+    except ImportError:
+        return "no PNG: matplotlib is not installed (pip install matplotlib)"
+
+
 def cmd_dam_break_pressure(args):
     from sphcore.validate import buchner
 
     out = Path(args.out)
     rows, summary = buchner.run_buchner(physics_settings(args, buchner.SETTINGS), out)
-    png = buchner.plot(rows, summary, out / "dam_break_pressure.png")
+    png = plotted(buchner.plot, rows, summary, out / "dam_break_pressure.png")
     met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in summary["meets"].items())
     print(f"{summary['particles']} particles, {summary['steps']} steps in {summary['wall_s']:.1f} s; P1 against Buchner "
           f"2002: impact peak t* {summary['peak_t_star']:.3f} ({100 * summary['peak_time_error']:+.1f} %), p* "
@@ -45,7 +53,7 @@ def cmd_tank(args):
 
     out = Path(args.out)
     rows, summary = tank.run_tank(physics_settings(args, tank.SETTINGS), out)
-    png = tank.plot(rows, summary, out / "tank.png")
+    png = plotted(tank.plot, rows, summary, out / "tank.png")
     met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in summary["meets"].items())
     print(f"{summary['particles']} particles, {summary['steps']} steps in {summary['wall_s']:.1f} s; at t = "
           f"{rows[-1]['t']:.3g} s: slope {100 * summary['slope_error']:+.2f} % of rho g, largest deviation "
@@ -58,7 +66,7 @@ def cmd_spheric(args):
 
     settings = physics_settings(args, ("backend", "device", "spacing", "t_end", "dt_fraction"))
     rows, summary = spheric.run_spheric(settings, args.out)
-    png = spheric.plot(rows, summary, Path(args.out) / "spheric_test2.png")
+    png = plotted(spheric.plot, rows, summary, Path(args.out) / "spheric_test2.png")
     rms = ", ".join(f"{g} {summary[f'rms_{g}']:.3f}" for g in spheric.GAUGES)
     print(f"{summary['particles']} particles, {summary['steps']} steps of {summary['dt']:.3g} s in {summary['wall_s']:.1f} s "
           f"on {summary['device']}; RMS of the heights against Kleefsman et al. 2005 (m): {rms} -> {png}")
@@ -131,6 +139,8 @@ def add_physics_options(p):
     p.add_argument("--wall-model", choices=configs.choices("wall_model"), help="domain.wall_model")
     p.add_argument("--integrator", choices=configs.choices("integrator"), help="time.integrator")
     p.add_argument("--adaptive-dt", action="store_true", help='time.dt = "adaptive": the step chosen on the device')
+    p.add_argument("--pressure-solver", choices=configs.choices("pressure_solver"), help="physics.pressure_solver "
+                   "(dfsph: incompressible, dt from time.cfl_number on the particle speed)")
 
 
 def add_commands(sub):

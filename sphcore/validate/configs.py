@@ -26,6 +26,7 @@ SWITCHES = {
     "viscosity_model": ("physics.viscosity_model", ("laminar", "artificial")),
     "wall_model": ("domain.wall_model", ("free_slip", "no_slip")),
     "integrator": ("time.integrator", ("symplectic_euler", "verlet")),
+    "pressure_solver": ("physics.pressure_solver", ("state_equation", "dfsph")),  # issue 14
 }
 OPTIONS = (*SWITCHES, "adaptive_dt")  # the settings a case takes beside "config"
 ALPHA_KEY = "fluid.alpha"  # Monaghan's alpha of the artificial viscosity model
@@ -45,6 +46,11 @@ CONFIGS = {
     "verlet": {"time.integrator": "verlet"},
     # the recommended model with no-slip walls
     "engineering_no_slip": {**ENGINEERING, "domain.wall_model": "no_slip"},
+    # the recommended model with summation density (no continuity, no diffusion)
+    # issue 14: the incompressible pressure solver (DFSPH) in place of the state equation
+    "dfsph": {"physics.pressure_solver": "dfsph"},
+    "engineering_summation": {k: v for k, v in ENGINEERING.items() if k not in (
+        "physics.density", "physics.density_diffusion", "fluid.density_diffusion")},
 }
 DEFAULT_CONFIG = "graphics"
 RECOMMENDED_CONFIG = "engineering"

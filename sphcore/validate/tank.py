@@ -20,6 +20,7 @@ top, the lattice's top row at dx/2 below it): the weakly compressible column sin
 series (the sensors and both figures every SAMPLE_DT) shows the settling.
 """
 import math
+import textwrap
 
 import numpy as np
 
@@ -180,8 +181,9 @@ def plot(rows, summary, path):
     bx.title.set_fontsize(9)
     bx.legend(fontsize=7)
     s = summary["settings"]
-    fig.suptitle(f"hydrostatic tank, {summary['particles']} particles ({s['resolution']} per depth), configuration "
-                 f"{s['config']}: {configs.describe(summary['configuration'])}; {s['backend']}", fontsize=8)
+    fig.suptitle(textwrap.fill(f"hydrostatic tank, {summary['particles']} particles ({s['resolution']} per depth), "
+                               f"configuration {s['config']}: {configs.describe(summary['configuration'])}; {s['backend']}",
+                               150), fontsize=8)
     fig.tight_layout()
     atomic_savefig(fig, path)
     plt.close(fig)
