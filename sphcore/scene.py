@@ -16,7 +16,9 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from sphcore.params import CELL_PADDING, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
+from sphcore.params import CELL_PADDING, KERNELS, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
+
+DENSITY_DIFFUSIONS = ("none", "molteni", "fourtakas")  # physics.density_diffusion -> spec constant DENSITY_DIFFUSION
 from sphcore.paths import SCENE_DIR
 
 
@@ -56,6 +58,8 @@ def stable_dt(scene, max_speed=0.0):
     """
     h = scene.h
     bounds = {"CFL": 0.25 * h / (math.sqrt(scene["fluid.stiffness"]) + max_speed)}
+    if scene["physics.pressure_solver"] == "dfsph":  # incompressible: the CFL number on the particle speed alone
+        bounds = {"CFL": scene["time.cfl_number"] * scene["fluid.spacing"] / max_speed if max_speed > 0 else math.inf}
     mu = scene.shear_viscosity
     if mu > 0 and scene["physics.viscosity"]:
         bounds["viscous"] = 0.125 * h * h * scene["fluid.rest_density"] / mu
@@ -94,10 +98,24 @@ SCHEMA = {
         "gravity": Key(True, "", 0, 0, "the gravity term (vector forces.gravity)", "bool"),
         "precision": Key("float32", "", 0, 0, "float32, or float64 particle buffers and arithmetic (the "
                          "Vulkan device must support shaderFloat64)", "float32|float64"),
+        "kernel": Key("mueller", "", 0, 0, "mueller: poly6 values, spiky gradients, viscosity Laplacian (Mueller et "
+                      "al. 2003); wendland_c2: Wendland C2 for values and gradients, Morris et al. 1997's "
+                      "Laplacian; support radius h for both", "mueller|wendland_c2"),
+        "density": Key("summation", "", 0, 0, "summation: rho_i = sum_j m W_ij each step, pressure clamped at 0; "
+                       "continuity: d rho/dt = sum_j m (v_i - v_j) . grad W_ij integrated, starting hydrostatic, "
+                       "negative pressures kept", "summation|continuity"),
+        "density_diffusion": Key("none", "", 0, 0, "delta-SPH term of the continuity density (coefficient "
+                                 "fluid.density_diffusion): molteni (Molteni & Colagrossi 2009) or fourtakas "
+                                 "(Fourtakas et al. 2019: its hydrostatic part removed)", "none|molteni|fourtakas"),
         "viscosity_model": Key("laminar", "", 0, 0, "laminar: mu sum_j m (v_j - v_i) L_ij / (rho_i rho_j) (Mueller et al. "
                                "2003), coefficient fluid.viscosity; artificial: Monaghan 1992's Pi_ij = -alpha c h "
                                "(v_ij . r_ij) / (rho_ij (r^2 + 0.01 h^2)) for approaching pairs, coefficient fluid.alpha",
                                "laminar|artificial"),
+        "pressure_solver": Key("state_equation", "", 0, 0, "state_equation: the pressure from the density by "
+                               "physics.equation_of_state (weakly compressible); dfsph: divergence-free SPH (Bender & "
+                               "Koschier 2015, 2017), a divergence-free and a constant-density solve each step to "
+                               "fluid.max_divergence_error and fluid.max_density_error, dt from time.cfl_number on the "
+                               "particle speed", "state_equation|dfsph"),
     },
     "domain": {
         "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls (open: origin of the hashed grid)", "vec"),
@@ -124,6 +142,14 @@ SCHEMA = {
         "cohesion": Key(0.0, "m^dim/s^2", 0.0, 1e6, "kappa of the cohesion force -kappa sum_j W(r_ij) (x_i - x_j)"),
         "alpha": Key(0.02, "-", 0.0, 10.0, 'alpha of physics.viscosity_model = "artificial" (Monaghan 1992), with '
                      "c = sqrt(stiffness); its shear viscosity is mu = alpha rho_0 c h / (2 dim + 4)"),
+        "density_diffusion": Key(0.1, "-", 0.0, 1.0, "delta of physics.density_diffusion: D_i = delta h_s c_0 "
+                                 "sum_j psi_ij . grad W_ij V_j, h_s = h / 2, c_0 = sqrt(stiffness)"),
+        "max_density_error": Key(0.001, "-", 1e-6, 0.1, 'physics.pressure_solver = "dfsph": the constant-density solve '
+                                 "stops when the mean compression max(rho*/rho_0 - 1, 0) is at most this (0.001: 0.1 %)"),
+        "max_divergence_error": Key(0.001, "-", 1e-6, 0.1, 'physics.pressure_solver = "dfsph": the divergence-free solve '
+                                    "stops when the mean compression rate times dt is at most this"),
+        "max_iterations": Key(100, "-", 2, 1000, 'physics.pressure_solver = "dfsph": updates per solve and step at '
+                              "most (recorded on the device); a solve that reaches it unconverged is reported", "int"),
     },
     "forces": {
         "gravity": Key([0.0, -9.81], "m/s^2", -1e4, 1e4, "gravitational acceleration", "vec"),
@@ -139,6 +165,8 @@ SCHEMA = {
         "integrator": Key("symplectic_euler", "", 0, 0, "symplectic_euler: v += dt a, x += dt v (first order); verlet: "
                           "kick-drift-kick leapfrog, one force evaluation per step (second order)",
                           "symplectic_euler|verlet"),
+        "cfl_number": Key(0.4, "-", 0.01, 1.0, 'physics.pressure_solver = "dfsph": dt = min(the largest step, cfl_number '
+                          "fluid.spacing / |v|max) on the device each step (no sound speed)"),
         "steps": Key(5000, "steps", 1, 1e9, "steps to run unless --steps is given", "int"),
         "output_every": Key(250, "steps", 1, 1e9, "steps between snapshots", "int"),
         "checkpoint_every": Key(1000, "steps", 1, 1e9, "steps between checkpoints (what `sphcore run --resume` "
@@ -152,6 +180,7 @@ _FOLDED_FROM = {
     "cohesion_coef": ("fluid.cohesion", "fluid.spacing", "fluid.smoothing_ratio"),
     "viscosity_coef": ("fluid.viscosity", "fluid.spacing", "fluid.smoothing_ratio"),
     "stiffness": ("fluid.stiffness", "fluid.rest_density"),
+    "diffusion_coef": ("fluid.density_diffusion", "fluid.stiffness", "fluid.spacing", "fluid.smoothing_ratio"),
 }
 
 
@@ -246,6 +275,7 @@ class Scene:
                 if name not in data.get(table, {}):
                     config[table][name] = config[table][name] + [z]
         scene = cls(config, source)
+        scene._check_models()
         scene._check_geometry()
         return scene
 
@@ -257,7 +287,7 @@ class Scene:
             data = tomllib.loads(read_limited(path))  # a byte-order mark is allowed
         except FileNotFoundError:
             if Path(given).parent == Path(".") and Path(given).suffix in ("", ".toml"):
-                raise SceneError(f"{given}: no such scene file, and no shipped scene of that name (shipped: "
+                raise SceneError(f"{_shown(str(given))}: no such scene file, and no shipped scene of that name (shipped: "
                                  f"{', '.join(shipped_scenes())})") from None
             raise SceneError(f"{path}: no such scene file") from None
         except OSError as e:  # a folder, no permission
@@ -286,6 +316,9 @@ class Scene:
     @property
     def dt(self):
         """The time step [s]: time.dt, or time.dt_fraction of the stability bound where it is "auto"."""
+        if self.dfsph:  # the estimate: the largest step, or the CFL number's at the free-fall speed
+            speed, largest = self.speed_estimate(), self._folded_dt()
+            return min(largest, self["time.cfl_number"] * self["fluid.spacing"] / speed) if speed > 0 else largest
         if self["time.dt"] in ("auto", "adaptive"):  # adaptive: the estimate; the device sets each step's
             return self["time.dt_fraction"] * stable_dt(self, self.speed_estimate())[0]
         return self["time.dt"]
@@ -302,17 +335,27 @@ class Scene:
     @property
     def adaptive_dt(self):
         """Whether each step's dt is computed on the device (time.dt = "adaptive")."""
-        return self["time.dt"] == "adaptive"
+        return self["time.dt"] == "adaptive" or self.dfsph
+
+    @property
+    def dfsph(self):
+        """Whether the pressure comes from the DFSPH solver (physics.pressure_solver = "dfsph"): then each
+        step's dt is the device's (CFL on the particle speed), time.dt (a number) its largest."""
+        return self["physics.pressure_solver"] == "dfsph"
 
     def _folded_dt(self):
         """P.dt: the time step, or where it is adaptive the largest one, dt_fraction times the viscous
         bound (1 s without viscosity): the state-dependent bounds are the device's (choose_dt.comp)."""
-        if not self.adaptive_dt:
-            return self.dt
+        if not self.adaptive_dt or self.dfsph and self["time.dt"] not in ("auto", "adaptive"):
+            return self["time.dt"] if self.dfsph else self.dt
         mu = self.shear_viscosity
+        largest = 1.0
         if mu > 0 and self["physics.viscosity"]:
-            return self["time.dt_fraction"] * 0.125 * self.h ** 2 * self["fluid.rest_density"] / mu
-        return 1.0
+            largest = self["time.dt_fraction"] * 0.125 * self.h ** 2 * self["fluid.rest_density"] / mu
+        g = math.sqrt(sum(c * c for c in self["forces.gravity"])) if self["physics.gravity"] else 0.0
+        if self.dfsph and g > 0:  # DFSPH: gravity moves a particle at rest by at most 1 % of dx in one step
+            largest = min(largest, self["time.dt_fraction"] * 0.1 * math.sqrt(self["fluid.spacing"] / g))
+        return largest
 
     def speed_estimate(self):
         """The fastest flow to expect [m/s]: free fall from the top of the fluid to the floor,
@@ -331,6 +374,19 @@ class Scene:
     @property
     def h(self):
         return self["fluid.spacing"] * self["fluid.smoothing_ratio"]
+
+    def _check_models(self):
+        """Combinations of physics.* that have no meaning."""
+        if self["physics.pressure_solver"] == "dfsph":
+            for key, value, why in (("physics.density", "continuity", "DFSPH's densities are summed each step"),
+                                    ("time.integrator", "verlet", "the solve corrects the symplectic Euler step's "
+                                     "velocity")):
+                if self[key] == value:
+                    raise SceneError(f'physics.pressure_solver = "dfsph" does not go with {key} = "{value}" ({why})')
+        if self["physics.density_diffusion"] != "none" and self["physics.density"] != "continuity":
+            raise SceneError(f"physics.density_diffusion = {self['physics.density_diffusion']!r} needs "
+                             f'physics.density = "continuity" (got {self["physics.density"]!r}): a summation '
+                             "density is recomputed from the positions every step, there is nothing to diffuse")
 
     def _check_geometry(self):
         dim = self.dim
@@ -449,7 +505,32 @@ class Scene:
 
     @property
     def mass(self):
-        return lattice_mass(self["fluid.spacing"], self.h, self["fluid.rest_density"], self.dim)
+        return lattice_mass(self["fluid.spacing"], self.h, self["fluid.rest_density"], self.dim, self["physics.kernel"])
+
+    def initial_density(self, positions):
+        """Each particle's density at the start (N,), float64. With physics.density = "continuity" the
+        density is state: it starts hydrostatic, so that a tank starts at rest, rho = EOS^-1(rho_0 |g_a|
+        depth) along the axis a that gravity mostly points along, depth below the top of the highest block
+        whose column holds the particle (linear: rho_0 + p / k; Tait: rho_0 (1 + p / B)^(1/7)). Summation
+        recomputes it every step: rho_0 here."""
+        x = np.asarray(positions, np.float64)
+        rho0 = self["fluid.rest_density"]
+        g = np.asarray(self["forces.gravity"], np.float64) if self["physics.gravity"] else np.zeros(self.dim)
+        if self["physics.density"] != "continuity" or not g.any():
+            return np.full(len(x), rho0)
+        axis = int(np.argmax(np.abs(g)))
+        up = -np.sign(g[axis])
+        depth = np.zeros(len(x))
+        for block in self["fluid.blocks"]:
+            others = [a for a in range(self.dim) if a != axis]
+            column = np.all([(x[:, a] >= block["min"][a]) & (x[:, a] <= block["max"][a]) for a in others], axis=0)
+            top = block["max"][axis] if up > 0 else block["min"][axis]
+            depth = np.where(column, np.maximum(depth, up * (top - x[:, axis])), depth)
+        p = rho0 * abs(g[axis]) * np.maximum(depth, 0.0)
+        k = self["fluid.stiffness"]
+        if self["physics.equation_of_state"] == "tait":
+            return rho0 * (1.0 + p / (rho0 * k / 7.0)) ** (1.0 / 7.0)
+        return rho0 + p / k
 
     @property
     def spec(self):
@@ -459,9 +540,11 @@ class Scene:
                     WALLS=self["domain.boundary"] == "walls", TAIT=physics["equation_of_state"] == "tait",
                     VISCOSITY=physics["viscosity"], SURFACE_TENSION=physics["surface_tension"],
                     GRAVITY=physics["gravity"], NEIGHBOUR_STATS=False, OBSTACLES=len(self["domain.obstacles"]),
+                    KERNEL=KERNELS.index(physics["kernel"]), CONTINUITY=physics["density"] == "continuity",
+                    DENSITY_DIFFUSION=DENSITY_DIFFUSIONS.index(physics["density_diffusion"]),
                     VISCOSITY_MODEL=("laminar", "artificial").index(physics["viscosity_model"]),
                     NO_SLIP=self["domain.wall_model"] == "no_slip", VERLET=self["time.integrator"] == "verlet",
-                    ADAPTIVE_DT=self.adaptive_dt)
+                    ADAPTIVE_DT=self.adaptive_dt, DFSPH=self.dfsph)
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""
@@ -471,8 +554,11 @@ class Scene:
             viscosity=self["fluid.viscosity"], cohesion=self["fluid.cohesion"], dt=self._folded_dt(),
             restitution=self["walls.restitution"], gravity=self["forces.gravity"],
             box_min=self["domain.box_min"], box_max=self["domain.box_max"], grid_dim=self.grid_dim,
+            kernel=self["physics.kernel"], density_diffusion=self["physics.density_diffusion"],
+            diffusion_delta=self["fluid.density_diffusion"], gravity_on=self["physics.gravity"],
             viscosity_model=self["physics.viscosity_model"], alpha=self["fluid.alpha"],
-            cfl_number=0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0)
+            cfl_number=(self["time.cfl_number"] / self["fluid.smoothing_ratio"] if self.dfsph
+                        else 0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0))
 
     def to_json(self):
         return json.dumps(self.config, sort_keys=True)

@@ -205,5 +205,5 @@ def test_version(capsys):
 def test_unknown_scene_name_lists_the_shipped_scenes(capsys):
     assert main(["run", "dam_brake_2d", "--steps", "1"]) == 1
     err = capsys.readouterr().err
-    assert "dam_brake_2d: no such scene file, and no shipped scene of that name" in err
+    assert "'dam_brake_2d': no such scene file, and no shipped scene of that name" in err
     assert "dam_break_2d, dam_break_3d" in err and len(err.strip().splitlines()) == 1
