@@ -3,8 +3,10 @@
 # sphcore/validate/configs.py) on one NVIDIA H200 (or H100) through Vulkan, into $OUT/model/
 # (default validation/results/model/), the runs side by side on the GPU:
 #   mm_engineering_80, _160     Martin & Moyce at 80 and 160 particles across a (graphics: results/gpu/dam_break_2d_res*)
-#   buchner_<config>_120        Buchner 2002 P1 pressure at H/120 (28,800 particles), both configurations
-#   tank_<config>_60            the hydrostatic tank at 60 particles per depth, both configurations
+#   mm_engineering_h2_*         the same with the support radius 2 dx (the scenes' default) instead of 4 dx
+#   buchner_<config>_120        Buchner 2002 P1 pressure at H/120 (28,800 particles), graphics, engineering
+#                               and engineering_h2
+#   tank_<config>_60            the hydrostatic tank at 60 particles per depth, the same three
 #   spheric_engineering         SPHERIC test 2, dx = 0.02 m, engineering, dt adaptive at the whole bound
 # Run from the repository root on the device machine, with the ignored folders .gl (Vulkan loader
 # and glslang debs) and .whl (the vulkan, cffi and pycparser wheels for its Python 3.12) carried
@@ -24,12 +26,14 @@ run() {  # run NAME ARGS...: `sphcore validate ARGS --out $dir/NAME --backend vu
     echo "$1 rc=$? $(tr '\r' '\n' < "$dir/$1.log" | grep -v '%|' | tail -1)"
 }
 run spheric_engineering spheric --spacing 0.02 --t-end 6 --config engineering --adaptive-dt --dt-fraction 1 &
-for c in graphics engineering; do
+for c in graphics engineering engineering_h2; do
     run "buchner_${c}_120" dam-break-pressure --resolution 120 --config "$c" &
     run "tank_${c}_60" tank --resolution 60 --config "$c" &
 done
-for r in 80 160; do
-    run "mm_engineering_$r" dam-break --resolution "$r" --config engineering &
+for c in engineering engineering_h2; do
+    for r in 80 160; do
+        run "mm_${c}_$r" dam-break --resolution "$r" --config "$c" &
+    done
 done
 wait
 [ "${TAR:-0}" = 1 ] && tar -czf "$OUT/model.tgz" -C "$OUT" model && ls -la "$OUT/model.tgz"

@@ -96,8 +96,9 @@ def test_tank_profile_of_an_exact_hydrostatic_field():
 
 def test_configurations_name_scene_keys():
     assert configs.overrides({}) == {}
-    eng = configs.overrides({"config": "engineering", "alpha": 0.05})
-    assert eng["physics.kernel"] == "wendland_c2" and eng[configs.ALPHA_KEY] == 0.05
+    eng = configs.overrides({"config": "engineering", "alpha": 0.05})  # its alpha goes with its smoothing ratio
+    assert eng["physics.kernel"] == "wendland_c2" and eng[configs.ALPHA_KEY] == 0.01
+    assert configs.overrides({"config": "artificial", "alpha": 0.05})[configs.ALPHA_KEY] == 0.05
     assert configs.overrides({"config": "graphics", "kernel": "wendland_c2"}) == {"physics.kernel": "wendland_c2"}
     assert configs.overrides({"adaptive_dt": True}) == {"time.dt": "adaptive"}
     with pytest.raises(SceneError, match="--config nope: no such configuration"):
