@@ -12,6 +12,7 @@ with them and `in_particle_order` undoes the permutation for output.
 buffers and of the arithmetic on them: Vulkan builds the shaders with SPHCORE_FLOAT64
 (shaders/sph/real.glsl), numba builds the mirrors with `real = np.float64`.
 """
+import time
 from collections import namedtuple
 
 import numpy as np
@@ -24,8 +25,14 @@ from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
+from sphcore.sph.dfsph import SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.dfsph_check import dfsph_check
+from sphcore.sph.dfsph_factor import dfsph_factor
+from sphcore.sph.dfsph_residual import dfsph_residual
+from sphcore.sph.dfsph_velocity import dfsph_velocity
 from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
+from sphcore.sph.integrate_density import integrate_density
 from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.scatter_particles import scatter_particles
@@ -59,7 +66,18 @@ BUFFERS = {
     "particle_vh": (REAL, 4, "particles"),
     "time_state": (np.float32, 4, 1),
     "dt_partial": (REAL, 2, "particles"),
+    "particle_alpha": (REAL, 1, "particles"),
+    "particle_residual": (REAL, 1, "particles"),
+    "dfsph_control": (np.uint32, 1, 16),
+    "dfsph_state": (np.float32, 1, 8),
+    "dfsph_history": (np.float32, 8, 256),
+    "particle_kappa": (REAL, 1, "particles"),
 }
+# particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
+# (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
+# particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
+# dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
+# step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
 # time_state: (dt, the last step's dt, time hi, time lo) written on the device by choose_dt (with
 # time.dt = "adaptive" or "verlet"; zero at the start); the time is hi + lo (a compensated float32 sum).
@@ -81,22 +99,39 @@ STAGES = {
                                                            "sorted_index")),
     "sort_cells": (sort_cells, "cells", ("cell_pyramid", "cell_start", "sorted_index")),
     "gather_particles": (gather_particles, "particles", ("particle_x", "particle_v", "particle_id", "sorted_index",
-                                                         "scratch_x", "scratch_v", "scratch_id", "particle_a",
-                                                         "particle_vh")),
+                                                         "scratch_x", "scratch_v", "scratch_id", "particle_rho",
+                                                         "scratch_rho", "particle_a", "particle_vh",
+                                                         "particle_kappa")),
     "apply_order": (apply_order, "particles", ("particle_x", "particle_v", "particle_id", "scratch_x",
-                                               "scratch_v", "scratch_id", "particle_a", "particle_vh")),
-    "compute_density": (compute_density, "particles", ("particle_x", "particle_rho", "particle_p",
+                                               "scratch_v", "scratch_id", "particle_rho", "scratch_rho",
+                                               "particle_a", "particle_vh", "particle_kappa")),
+    "compute_density": (compute_density, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
                                                        "cell_pyramid", "cell_start", "particle_id",
-                                                       "particle_neighbours", "obstacle_box")),
+                                                       "particle_neighbours", "obstacle_box", "particle_drho")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "cell_pyramid", "cell_start", "obstacle_box")),
     "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
+    "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "cell_pyramid", "cell_start",
+                                                 "obstacle_box", "particle_alpha", "dfsph_control",
+                                                 "particle_kappa")),
+    "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
+                                                     "cell_pyramid", "cell_start", "obstacle_box", "time_state",
+                                                     "particle_residual", "dfsph_control")),
+    "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
+                                                     "particle_p", "cell_pyramid", "cell_start", "obstacle_box",
+                                                     "time_state", "particle_alpha", "particle_residual",
+                                                     "dfsph_control", "particle_kappa")),
+    "dfsph_check": (dfsph_check, "one", ("time_state", "particle_residual", "dfsph_control", "dfsph_state",
+                                         "dfsph_history")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
                                            "time_state")),
+    "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
+                                                           "time_state")),
 }
 
-Stage = namedtuple("Stage", "name level")  # level: the HistoPyramid level a reduce_cells builds, else 0
+Stage = namedtuple("Stage", "name level")  # level: the HistoPyramid level a reduce_cells builds, the solve of a
+#                                            DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), else 0
 Stage.__new__.__defaults__ = (0,)
 
 
@@ -114,11 +149,28 @@ def plan(scene):
     the specialization constants `scene.spec` (a disabled term is compiled out of its shader)."""
     spec = scene.spec
     stages = neighbour_stages(int(np.prod(scene.grid_dim))) if spec.GRID else []
-    stages += [Stage("compute_density"), Stage("compute_forces")]
+    stages += [Stage("compute_density")]
+    stages += [Stage("integrate_density")] if spec.CONTINUITY else []  # the density is state (continuity)
+    # DFSPH (physics.pressure_solver = "dfsph"): the factor and the divergence-free solve before the forces,
+    # the constant-density solve once the step's dt is known (dfsph.glsl)
+    iterations = scene["fluid.max_iterations"]
+    stages += [Stage("dfsph_factor")] + dfsph_solve(SOLVE_DIVERGENCE, iterations) if spec.DFSPH else []
+    stages += [Stage("compute_forces")]
     # the step's dt on the device (time.dt = "adaptive"), and the last step's for Verlet
     stages += [Stage("reduce_dt")] if spec.ADAPTIVE_DT else []
     stages += [Stage("choose_dt")] if spec.ADAPTIVE_DT or spec.VERLET else []
+    # (the warm start where the first residual finds compression, as SPlisHSPlasH's; then the solve)
+    stages += [Stage("dfsph_residual", SOLVE_DENSITY), Stage("dfsph_velocity", SOLVE_WARM_START)] + dfsph_solve(
+        SOLVE_DENSITY, iterations) if spec.DFSPH else []
     return stages + [Stage("integrate")]
+
+
+def dfsph_solve(solve, iterations):
+    """One DFSPH solve as recorded: the residual and its check, then `iterations` times an update, the
+    residual and the check. Once a check stops the solve, the rest of its stages return at once: the
+    loop ends on the device, with no readback, and both backends run the same updates."""
+    return ([Stage("dfsph_residual", solve), Stage("dfsph_check", solve)]
+            + [Stage("dfsph_velocity", solve), Stage("dfsph_residual", solve), Stage("dfsph_check", solve)] * iterations)
 
 
 def buffer_dtype(name, precision="float32"):
@@ -216,8 +268,11 @@ class NumbaBackend:
 
     name = "numba"
 
-    def __init__(self, params, state, stages, spec, local_size=128, precision="float32"):
+    def __init__(self, params, state, stages, spec, local_size=128, precision="float32", profile=None):
         self.params, self.stages, self.spec, self.local_size = params, stages, spec, local_size
+        self.profile = profile  # a sphcore.profile.Profile: each launch timed by the host clock
+        if profile is not None:
+            profile.device = "cpu (numba)"
         self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
         self._launch = [(STAGES[s.name][0](spec, self.real), group_count(dispatch_size(s, params), local_size),
@@ -238,9 +293,19 @@ class NumbaBackend:
                stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
     def step(self, count=1):
+        if self.profile is not None:
+            return self._profiled_step(count)
         for _ in range(count):
             for launch, groups, params, buffers in self._launch:
                 launch(groups, self.local_size, params, *buffers)
+
+    def _profiled_step(self, count):
+        for _ in range(count):
+            for stage, (launch, groups, params, buffers) in zip(self.stages, self._launch):
+                start = time.perf_counter()
+                launch(groups, self.local_size, params, *buffers)
+                self.profile.add(stage.name, time.perf_counter() - start)
+        self.profile.steps += count
 
     def read(self):
         return {k: v.copy() for k, v in self.state.items()}
@@ -264,7 +329,7 @@ class VulkanBackend:
     name = "vulkan"
 
     def __init__(self, params, state, stages, spec, local_size=128, device=None, validation=None,
-                 steps_per_submit=64, precision="float32", before_allocating=None):
+                 steps_per_submit=64, precision="float32", before_allocating=None, profile=None):
         """`before_allocating(ctx)`: called once the device is chosen, before any buffer is made
         (sphcore.Simulation checks there that lavapipe's buffers fit in host memory)."""
         from sphcore.vk_runner import Context
@@ -274,6 +339,10 @@ class VulkanBackend:
         if before_allocating is not None:
             before_allocating(self.ctx)
         self.params, self.stages, self.steps_per_submit, self.precision = params, stages, steps_per_submit, precision
+        self.profile = profile  # a sphcore.profile.Profile: a GPU timestamp after every dispatch of step()
+        if profile is not None:
+            profile.device = self.ctx.device_name
+            self.ctx.timer(1).free()  # a device without timestamps says so now (VulkanError)
         self.shapes = {}
         self.buffers = {}
         for name, (_, c, length) in BUFFERS.items():
@@ -298,17 +367,31 @@ class VulkanBackend:
             self.pipelines[name] = pipeline
         return self.pipelines[name]
 
-    def _recording(self, steps, stages):
-        key = (steps, tuple(stages))
+    def _recording(self, steps, stages, timed=False):
+        """`steps` steps of `stages` in one command buffer; `timed`: a timestamp after each dispatch."""
+        key = (steps, tuple(stages), timed)
         if key not in self._recordings:
             rec = self.ctx.record()
-            for _ in range(steps):
-                for stage in stages:
+            rec.timer = self.ctx.timer(steps * len(stages) + 1) if timed else None
+            if timed:
+                rec.timestamp(rec.timer, 0)
+            for s in range(steps):
+                for k, stage in enumerate(stages):
                     rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
                                  dispatch_size(stage, self.params))
                     rec.barrier()
+                    if timed:
+                        rec.timestamp(rec.timer, 1 + s * len(stages) + k)
             self._recordings[key] = rec.end()
         return self._recordings[key]
+
+    def _submit_steps(self, steps):
+        rec = self._recording(steps, self.stages, timed=self.profile is not None)
+        self.ctx.submit(rec)
+        if rec.timer is not None:
+            for stage, seconds in zip(self.stages * steps, rec.timer.seconds()):
+                self.profile.add(stage.name, seconds)
+            self.profile.steps += steps
 
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
@@ -318,9 +401,9 @@ class VulkanBackend:
     def step(self, count=1):
         full, rest = divmod(count, self.steps_per_submit)
         for _ in range(full):
-            self.ctx.submit(self._recording(self.steps_per_submit, self.stages))
+            self._submit_steps(self.steps_per_submit)
         if rest:
-            self.ctx.submit(self._recording(rest, self.stages))
+            self._submit_steps(rest)
 
     def read(self):
         return {name: self.buffers[name].read(self.dtypes[name], self.shapes[name]) for name in BUFFERS}
@@ -338,6 +421,8 @@ class VulkanBackend:
         self.ctx.vk.vkDeviceWaitIdle(self.ctx.device)
         for rec in self._recordings.values():
             rec.free()
+            if rec.timer is not None:
+                rec.timer.free()
         for p in self.pipelines.values():
             p.free()
         for b in self.buffers.values():

@@ -50,24 +50,50 @@ PARAMS_DTYPE = dtype_from_glsl_block((SHADER_DIR / "sph" / "params.glsl").read_t
 MC_PARAMS_DTYPE = dtype_from_glsl_block((SHADER_DIR / "mc" / "params.glsl").read_text())
 
 
-def kernel_coefficients(h, dim=2):
-    """Normalisation constants of the Mueller et al. (2003) kernels in `dim` dimensions.
+KERNELS = ("mueller", "wendland_c2")  # scene key physics.kernel; the index is specialization constant KERNEL
 
-    poly6: W = c (h^2 - r^2)^3; spiky: grad W = c (h - r)^2 r_hat (c < 0);
-    viscosity: lap W = c (h - r). Seed 1 used the 3D constants in a 2D simulation;
+
+def kernel_coefficients(h, dim=2, kernel="mueller"):
+    """Normalisation constants of the kernels of shaders/sph/kernels.glsl in `dim` dimensions,
+    support radius h. Generic keys, one per helper: W = w * kernel_w, grad_i W = -gradient *
+    kernel_gradient * r_hat, L = laplacian * kernel_laplacian.
+
+    mueller (Mueller et al. 2003): poly6: W = c (h^2 - r^2)^3; spiky: grad W = c (h - r)^2 r_hat
+    (c < 0); viscosity: lap W = c (h - r). Seed 1 used the 3D constants in a 2D simulation;
     the 2D ones below make each kernel integrate to one over the plane.
+    wendland_c2: W = sigma (1 - q)^4 (1 + 4 q), q = r / h, sigma = 7 / (pi h^2) (2D),
+    21 / (2 pi h^3) (3D); |grad W| = (20 sigma / h) q (1 - q)^3; L = -2 r . grad W / (r^2 + 0.01 h^2)
+    (Morris et al. 1997), coefficient 2 * 20 sigma / h.
     """
-    if dim == 2:
-        return {"poly6": 4.0 / (math.pi * h**8), "spiky_grad": -30.0 / (math.pi * h**5),
-                "visc_lap": 40.0 / (math.pi * h**5)}
-    if dim == 3:
-        return {"poly6": 315.0 / (64.0 * math.pi * h**9), "spiky_grad": -45.0 / (math.pi * h**6),
-                "visc_lap": 45.0 / (math.pi * h**6)}
-    raise ValueError(f"dimension must be 2 or 3, got {dim}")
+    if dim not in (2, 3):
+        raise ValueError(f"dimension must be 2 or 3, got {dim}")
+    if kernel == "mueller":
+        if dim == 2:
+            c = {"poly6": 4.0 / (math.pi * h**8), "spiky_grad": -30.0 / (math.pi * h**5),
+                 "visc_lap": 40.0 / (math.pi * h**5)}
+        else:
+            c = {"poly6": 315.0 / (64.0 * math.pi * h**9), "spiky_grad": -45.0 / (math.pi * h**6),
+                 "visc_lap": 45.0 / (math.pi * h**6)}
+        return {**c, "w": c["poly6"], "gradient": -c["spiky_grad"], "laplacian": c["visc_lap"]}
+    if kernel == "wendland_c2":
+        sigma = 7.0 / (math.pi * h**2) if dim == 2 else 21.0 / (2.0 * math.pi * h**3)
+        return {"w": sigma, "gradient": 20.0 * sigma / h, "laplacian": 40.0 * sigma / h}
+    raise ValueError(f"unknown kernel {kernel!r}: choose one of {', '.join(KERNELS)}")
 
 
-def lattice_mass(spacing, h, rest_density, dim=2):
-    """Particle mass that makes a full square (cubic) lattice of `spacing` sum to `rest_density`.
+def kernel_shape(r2, h, kernel="mueller"):
+    """kernels.glsl's kernel_w at squared distances r2 (numpy, float64; 0 beyond h): W over
+    kernel_coefficients(...)["w"]."""
+    r2 = np.asarray(r2, np.float64)
+    if kernel == "wendland_c2":
+        q = np.clip(np.sqrt(r2) / h, 0.0, 1.0)
+        return (1.0 - q) ** 4 * (1.0 + 4.0 * q)
+    return np.clip(h * h - r2, 0.0, None) ** 3
+
+
+def lattice_mass(spacing, h, rest_density, dim=2, kernel="mueller"):
+    """Particle mass that makes a full square (cubic) lattice of `spacing` sum to `rest_density`
+    with the scene's kernel.
 
     With h = 2 spacing the kernel sum on a lattice is a few percent off one; scaling the mass
     removes that bias so a fluid at rest starts at rho_0.
@@ -75,8 +101,7 @@ def lattice_mass(spacing, h, rest_density, dim=2):
     reach = int(math.ceil(h / spacing))
     offsets = np.arange(-reach, reach + 1) * spacing
     r2 = sum(np.meshgrid(*[offsets**2] * dim, indexing="ij"))
-    q = np.clip(h * h - r2, 0.0, None)
-    return rest_density / (kernel_coefficients(h, dim)["poly6"] * np.sum(q**3))
+    return rest_density / (kernel_coefficients(h, dim, kernel)["w"] * np.sum(kernel_shape(r2, h, kernel)))
 
 
 # Cells are h wide, padded by 2^-12: a pair closer than h is then never two cells apart, even
@@ -97,25 +122,28 @@ def pyramid_levels(cell_total):
 
 
 def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
-                    gravity, box_min, box_max, grid_dim=(1, 1, 1), viscosity_model="laminar", alpha=0.0, cfl_number=0.0):
+                    gravity, box_min, box_max, grid_dim=(1, 1, 1), kernel="mueller", density_diffusion="none",
+                    diffusion_delta=0.1, gravity_on=True, viscosity_model="laminar", alpha=0.0, cfl_number=0.0):
     """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
-    `dim` components are padded with zeros to three.
+    `dim` components are padded with zeros to three. `kernel`: physics.kernel; `density_diffusion`
+    ("none" | "molteni" | "fourtakas") with coefficient `diffusion_delta` (fluid.density_diffusion);
+    `gravity_on`: physics.gravity (the hydrostatic part of Fourtakas' diffusion needs it).
     `viscosity_model` ("laminar" | "artificial"; physics.viscosity_model): laminar takes `viscosity`
     (mu), artificial `alpha` (fluid.alpha; viscosity_coef = alpha c h, c = sqrt(stiffness));
     `cfl_number`: 0.25 time.dt_fraction where time.dt = "adaptive" (then `dt` is the largest step)."""
-    c = kernel_coefficients(h, dim)
+    c = kernel_coefficients(h, dim, kernel)
     pad = lambda v: list(v) + [0.0] * (3 - len(v))  # noqa: E731
     params = np.zeros(1, PARAMS_DTYPE)
     p = params[0]
     p["n"] = n
     p["h"] = h
     p["h2"] = h * h
-    p["density_coef"] = mass * c["poly6"]
-    p["pressure_coef"] = -mass * c["spiky_grad"]
-    p["viscosity_coef"] = viscosity * mass * c["visc_lap"]
+    p["density_coef"] = mass * c["w"]
+    p["pressure_coef"] = mass * c["gradient"]
+    p["viscosity_coef"] = viscosity * mass * c["laplacian"]
     if viscosity_model == "artificial":  # Monaghan 1992's alpha c h (shaders/sph/viscosity.glsl)
         p["viscosity_coef"] = alpha * math.sqrt(stiffness) * h
-    p["cohesion_coef"] = -cohesion * c["poly6"]
+    p["cohesion_coef"] = -cohesion * c["w"]
     p["rest_density"] = rest_density
     # Tait: B = rho_0 c^2 / 7 gives the linear law's sound speed c = sqrt(k) at rho_0
     p["stiffness"] = rest_density * stiffness / 7.0 if tait else stiffness
@@ -128,6 +156,15 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     p["grid_dim"] = grid_dim
     p["cell_total"] = int(np.prod(grid_dim))
     p["levels"] = pyramid_levels(int(np.prod(grid_dim)))[0]
+    # delta-SPH (Molteni & Colagrossi 2009): D_i = delta h_s c_0 sum_j psi_ij . grad_i W_ij V_j with
+    # psi_ij = 2 (rho_j - rho_i) r_ji / r^2 and h_s = h / 2 (half the support: the smoothing length of the
+    # customary delta = 0.1; DualSPHysics folds the same 2 delta h_s = delta times the support); with
+    # r_ji . m grad_i W_ij = pressure_coef kernel_gradient r, that is diffusion_coef sum_j (rho_j - rho_i)
+    # / rho_j kernel_gradient r / (r^2 + 0.01 h^2) (density_diffusion.glsl)
+    if density_diffusion != "none":
+        p["diffusion_coef"] = diffusion_delta * h * math.sqrt(stiffness) * mass * c["gradient"]
+    if density_diffusion == "fourtakas" and gravity_on:
+        p["hydrostatic"] = [rest_density * g / stiffness for g in pad(gravity)]
     p["cfl_number"] = cfl_number
     return params
 

@@ -36,7 +36,9 @@ CHECKPOINT = "checkpoint.npz"
 # The buffers that carry the state from one step to the next (and the outputs of the last one);
 # every other buffer is rewritten by each step before any stage reads it.
 CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p", "particle_id", "grid_status",
-           "particle_vh", "time_state")  # Verlet's half-step velocity; dt, the last dt and the time (adaptive dt)
+           "particle_vh", "time_state",  # Verlet's half-step velocity; dt, the last dt and the time (adaptive dt)
+           "dfsph_control", "dfsph_state",  # DFSPH: its step count, unconverged solves, tolerances and errors,
+           "particle_kappa")  # and its warm start
 
 
 class Simulation:
@@ -69,6 +71,11 @@ class Simulation:
         self.params = scene.params(self.n)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"])
         state["particle_x"][:, :self.dim] = x0
+        state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
+        if scene.dfsph:
+            from sphcore.pressure_solver import SolverLog, init_state
+            init_state(state, scene)
+            self.solver_log = SolverLog(scene)  # each step's iterations and errors (final.npz: solver_log)
         self.stages = plan(scene)
         self.backend = make_backend(backend, self.params, state, self.stages, scene.spec,
                                     precision=scene["physics.precision"], **backend_options)
@@ -83,7 +90,8 @@ class Simulation:
     def compute_densities(self):
         """Density and pressure of the current positions (a step without its forces and motion)."""
         for stage in self.stages:
-            if stage.name not in ("compute_forces", "reduce_dt", "choose_dt", "integrate"):
+            if stage.name not in ("compute_forces", "reduce_dt", "choose_dt", "integrate") and \
+                    not stage.name.startswith("dfsph_"):
                 self.backend.run_stage(stage)
 
     @property
@@ -105,8 +113,15 @@ class Simulation:
         return float(self.params[0]["dt"])
 
     def advance(self, steps):
+        if self.scene.dfsph:  # DFSPH: its log is read at least every HISTORY_ROWS steps (sphcore.pressure_solver)
+            from sphcore.sph.dfsph import HISTORY_ROWS
+            while steps > HISTORY_ROWS:
+                self.advance(HISTORY_ROWS)
+                steps -= HISTORY_ROWS
         self.backend.step(steps)
         self.step_count += steps
+        if self.scene.dfsph:
+            self.solver_log.collect(self.backend, self.step_count - steps, self.step_count)
 
     def read(self):
         """The state in particle order (vectors of `dim` components), checked. A check that fails
@@ -145,7 +160,9 @@ class Simulation:
         x, v = state["particle_x"].astype(np.float64), state["particle_v"].astype(np.float64)
         rho = state["particle_rho"].astype(np.float64)
         rho0, k = scene["fluid.rest_density"], scene["fluid.stiffness"]
-        r = np.maximum(rho / rho0, 1.0)  # the pressure is clamped at 0 below rest density
+        r = rho / rho0
+        if scene["physics.density"] == "summation":
+            r = np.maximum(r, 1.0)  # the pressure is clamped at 0 below rest density (not with continuity)
         if scene["physics.equation_of_state"] == "tait":
             internal = k / 7.0 * ((r ** 6 - 1.0) / 6.0 + 1.0 / r - 1.0)
         else:
@@ -172,6 +189,8 @@ class Simulation:
         arrays.update(energy_start=np.float64(self.energy_start), step=np.int64(self.step_count),
                       scene=np.array(self.scene.to_json()),
                       params=self.params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
+        if self.scene.dfsph:  # each step's iterations and errors so far: a resumed run's log is whole
+            arrays["solver_log"] = self.solver_log.array()
         return arrays
 
     def restore(self, arrays):
@@ -199,6 +218,10 @@ class Simulation:
                 self.backend.state[name][...] = values
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
+        if self.scene.dfsph and "solver_log" in arrays:  # (a replay's restore keeps the rows it has)
+            self.solver_log.rows = {int(r[0]): np.array(r, np.float64) for r in arrays["solver_log"]
+                                    if 0 < r[0] <= self.step_count}
+            self.solver_log.reported = int(arrays["buffer_dfsph_control"][6])  # CONTROL_FAILURES: reported then
 
     def check_grid(self, status):
         """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
@@ -332,6 +355,10 @@ def final_arrays(sim, state):
     }
     for field in sim.params.dtype.names:
         arrays[f"param_{field}"] = np.asarray(sim.params[0][field])
+    if sim.scene.dfsph:  # DFSPH: each step's dt, time, iterations and final errors (sphcore.pressure_solver)
+        from sphcore.pressure_solver import LOG_COLUMNS
+        arrays["solver_log"] = sim.solver_log.array()
+        arrays["solver_log_columns"] = np.array(LOG_COLUMNS)
     return arrays
 
 

@@ -56,6 +56,7 @@ def scene_state(scene, jitter=0.0, seed=0):
     params = scene.params(len(x))
     state = empty_state(params)
     state["particle_x"][:, :scene.dim] = x
+    state["particle_rho"][:] = scene.initial_density(x)  # the state's density with physics.density = "continuity"
     return state, params, plan(scene), scene.spec
 
 

@@ -1,6 +1,9 @@
 #version 460
 // Density and pressure, one invocation per particle. Neighbours from the grid (GRID) or all
 // pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
+// The kernel is kernels.glsl's (KERNEL). Summation density: rho_i = sum_j m W_ij. Continuity
+// density (CONTINUITY): rho_i is state, integrated by integrate.comp from the d rho/dt written here
+// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl).
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -8,17 +11,22 @@ layout(local_size_x_id = 0) in;
 #include "constants.glsl"
 #include "real.glsl"
 #include "cells.glsl"
+#include "kernels.glsl"
+#include "density_diffusion.glsl"
+#include "equation_of_state.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
 
 layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
-layout(std430, binding = 3) writeonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
+layout(std430, binding = 3) buffer ParticleRho { real particle_rho[]; };  // written (summation) or read (continuity)
 layout(std430, binding = 4) writeonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
+layout(std430, binding = 17) writeonly buffer ParticleDrho { real particle_drho[]; };
 
 // Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
 uint neighbour_hash(uint id, uint image) {
@@ -33,8 +41,14 @@ void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
-    // [2] own position
+    // [2] own position; with continuity density also the velocity and the density (state)
     real3 xi = particle_x[i].xyz;
+    real3 vi = real3(0.0);
+    real rhoi = real(0.0);
+    if (CONTINUITY) {
+        vi = particle_v[i].xyz;
+        rhoi = particle_rho[i];
+    }
     // [3] wall images: within h of a wall, particle i also sees every particle mirrored across
     //     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
     //     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
@@ -43,15 +57,21 @@ void main() {
     uint mirrored = near_walls(xi, wall);
     real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
-    // [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
+    // [4] sum kernel_w over every particle and image within h, self included (with
     //     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
     //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
     //     is within h of xi's own image xm, so the cells searched are those around xm.
+    //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
     real sum_w = real(0.0);
+    real sum_div = real(0.0);
+    real sum_diffusion = real(0.0);
     uint found = 0u;
     uint fingerprint = 0u;
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
+        bool fx = (image & 1u) != 0u;
+        bool fy = (image & 2u) != 0u;
+        bool fz = (image & 4u) != 0u;
         real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -71,32 +91,50 @@ void main() {
                 real3 r = xi - xk;
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 < P.h2) {
-                    real q = P.h2 - r2;
-                    sum_w += q * q * q;
+                    if (!CONTINUITY) sum_w += kernel_w(r2);
                     if (NEIGHBOUR_STATS) {
                         found += 1u;
                         fingerprint += neighbour_hash(particle_id[j], image);
                     }
                 }
+                if (!CONTINUITY || r2 >= P.h2 || (j == i && image == 0u)) continue;
+                // [6] continuity: the direction r_hat from the neighbour to i, as in compute_forces (where
+                //     the two coincide: an image along its plane's inward normal, two particles along x,
+                //     antisymmetrically in (i, j)); an image's velocity is mirrored on its flipped axes
+                real rlen = sqrt(r2);
+                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
+                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
+                if (fy) r_hat = real3(0.0, inward.y, 0.0);
+                if (fz) r_hat = real3(0.0, 0.0, inward.z);
+                if (rlen > real(0.0)) r_hat = r / rlen;
+                real3 vj = particle_v[j].xyz;
+                real vk_x = fx ? -vj.x : vj.x;
+                real vk_y = fy ? -vj.y : vj.y;
+                real vk_z = fz ? -vj.z : vj.z;
+                real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+                // [7] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
+                sum_div += kernel_gradient(r2, rlen) * v_r;
+                // [8] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
+                //     image carries its particle's density, so its hydrostatic difference is its particle's
+                if (DENSITY_DIFFUSION > 0u) sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
             }
         }
     }
-    // [6] rho_i = m sum_j W_poly6(r_ij, h)
+    // [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+    //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;
-    // [7] equation of state, clamped at 0 so that the free surface does not pull (tensile
-    //     instability); attraction, where a scene wants it, comes from the cohesion term.
-    //     linear: p = k (rho - rho_0) (seed 1); Tait: p = B ((rho / rho_0)^7 - 1) (Becker &
-    //     Teschner 2007, seed 2), the power by multiplications
-    real p = P.stiffness * (rho - P.rest_density);
-    if (TAIT) {
-        real ratio = rho / P.rest_density;
-        real ratio2 = ratio * ratio;
-        real ratio4 = ratio2 * ratio2;
-        p = P.stiffness * (ratio4 * ratio2 * ratio - real(1.0));
+    real drho = real(0.0);
+    if (CONTINUITY) {
+        rho = rhoi;
+        drho = -P.pressure_coef * sum_div;
+        if (DENSITY_DIFFUSION > 0u) drho += P.diffusion_coef * sum_diffusion;
     }
-    p = max(p, real(0.0));
-    // [8] store
-    particle_rho[i] = rho;
+    // [10] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+    //     density only)
+    real p = equation_of_state(rho);
+    // [11] store
+    if (!CONTINUITY) particle_rho[i] = rho;
     particle_p[i] = p;
+    if (CONTINUITY) particle_drho[i] = drho;
     if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
 }

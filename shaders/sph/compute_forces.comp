@@ -1,5 +1,6 @@
 #version 460
-// Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003), surface
+// Acceleration from pressure (kernels.glsl: the kernel gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
+// Monaghan 1992: viscosity.glsl; wall images' velocities: walls.glsl), surface
 // tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
 // Neighbours, wall and obstacle images as in compute_density; each optional term is compiled out by its
 // specialization constant.
@@ -10,6 +11,7 @@ layout(local_size_x_id = 0) in;
 #include "constants.glsl"
 #include "real.glsl"
 #include "cells.glsl"
+#include "kernels.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
@@ -72,7 +74,7 @@ void main() {
                 real rhoj = particle_rho[j];
                 real pj = particle_p[j];
                 real rlen = sqrt(r2);
-                real hr = P.h - rlen;
+                real grad = kernel_gradient(r2, rlen);  // kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
                 // [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
                 //     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                 //     along its inward normal; two particles are pushed apart along x,
@@ -82,25 +84,22 @@ void main() {
                 if (fy) r_hat = real3(0.0, inward.y, 0.0);
                 if (fz) r_hat = real3(0.0, 0.0, inward.z);
                 if (rlen > real(0.0)) r_hat = r / rlen;
-                // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
-                //     conserves momentum and energy with summation density (Monaghan 1992).
+                // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
+                //     conserves momentum and energy with summation or continuity density (Monaghan 1992).
                 //     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
                 //     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
-                real fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr;
-                f_pressure += fp * r_hat;
+                real fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * grad;
+                if (!DFSPH) f_pressure += fp * r_hat;  // DFSPH: the pressure is the solver's (dfsph.glsl)
                 // [8] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
                 //     artificial, Monaghan 1992); an image's velocity is the wall model's (walls.glsl:
                 //     free slip reverses its normal component, no slip all of it)
                 if (VISCOSITY) {
                     real3 vk = image_velocity(particle_v[j].xyz, image);
-                    f_viscosity += viscous_term(vi, vk, r, r2, rhoi, rhoj, hr * hr, hr, r_hat);
+                    f_viscosity += viscous_term(vi, vk, r, r2, rhoi, rhoj, grad, kernel_laplacian(r2, rlen), r_hat);
                 }
-                // [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
+                // [9] cohesion: -kappa sum_j W(r_ij) (x_i - x_j) (equal masses), between real
                 //     particles only: the walls are not wetted
-                if (SURFACE_TENSION && image == 0u) {
-                    real q = P.h2 - r2;
-                    f_cohesion += q * q * q * r;
-                }
+                if (SURFACE_TENSION && image == 0u) f_cohesion += kernel_w(r2) * r;
             }
         }
     }

@@ -7,11 +7,14 @@ layout(push_constant) uniform Params {
     uint n;               // particle count
     float h;              // smoothing length [m]
     float h2;             // h^2 [m^2]
-    float density_coef;   // m W_poly6's coefficient: 2D m 4/(pi h^8), 3D m 315/(64 pi h^9)
-    float pressure_coef;  // minus m times grad W_spiky's coefficient: 2D m 30/(pi h^5), 3D m 45/(pi h^6)
-    float viscosity_coef; // mu m lap W_visc's coefficient: 2D mu m 40/(pi h^5), 3D mu m 45/(pi h^6)
+    float density_coef;   // m times W's coefficient (kernels.glsl: m W = density_coef kernel_w); mueller:
+                          // W_poly6's, 2D m 4/(pi h^8), 3D m 315/(64 pi h^9)
+    float pressure_coef;  // m times |grad W|'s coefficient (m grad_i W_ij = -pressure_coef kernel_gradient
+                          // r_hat_ij); mueller: W_spiky's, 2D m 30/(pi h^5), 3D m 45/(pi h^6)
+    float viscosity_coef; // mu m L's coefficient (kernels.glsl: kernel_laplacian); mueller: lap W_visc's,
+                          // 2D mu m 40/(pi h^5), 3D mu m 45/(pi h^6)
                           // (VISCOSITY_MODEL 1, artificial: alpha c h [m^2/s], viscosity.glsl)
-    float cohesion_coef;  // kappa times W_poly6's coefficient (surface tension by cohesion)
+    float cohesion_coef;  // minus kappa times W's coefficient (surface tension by cohesion)
     float rest_density;   // rho_0 [kg/m^3] (2D: kg/m^2)
     float stiffness;      // linear: k in p = k (rho - rho_0); Tait: B in p = B ((rho/rho_0)^7 - 1)
     float dt;             // time step [s]; with ADAPTIVE_DT the largest allowed (the viscous bound)
@@ -25,7 +28,13 @@ layout(push_constant) uniform Params {
     uint levels;          // HistoPyramid levels above the base (the last one holds one node: the total)
     uvec3 grid_dim;       // cells per axis (the hash period per axis in an open domain)
     // -- density and kernels (issue 12: physics.kernel, physics.density, physics.density_diffusion)
+    float diffusion_coef; // delta-SPH: delta h c_0 times pressure_coef (fluid.density_diffusion; 0: none)
+    vec3 hydrostatic;     // rho_0 g / c^2 (c^2 = fluid.stiffness): rho^H_ji = hydrostatic . (x_j - x_i)
+                          // (Fourtakas et al. 2019; 0 unless density_diffusion = "fourtakas" and gravity)
     // -- forces, walls and time stepping (issue 12: viscosity_model, wall_model, integrator, dt)
     float cfl_number;     // time.dt = "adaptive": time.dt_fraction * 0.25, dt = cfl_number min(h / (c + |v|max),
-                          // sqrt(h / |a|max)), c^2 = k (choose_dt.comp)
+                          // sqrt(h / |a|max)), c^2 = k (choose_dt.comp). The block is now 128 bytes:
+                          // lavapipe's maxPushConstantsSize; a field more must come from a buffer
+    // -- pressure solver (issue 14): no field here (the block is full); fluid.max_density_error,
+    //    max_divergence_error and max_iterations reach the shaders in dfsph_state and dfsph_control
 } P;

@@ -1,5 +1,8 @@
 """Density and pressure, one invocation per particle. Neighbours from the grid (GRID) or all
 pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
+The kernel is kernels.glsl's (KERNEL). Summation density, or with CONTINUITY the rate d rho/dt
+(particle_drho) of the density that integrate.comp integrates, with density diffusion
+(DENSITY_DIFFUSION).
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -10,6 +13,9 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
+from sphcore.sph.density_diffusion import density_diffusion
+from sphcore.sph.equation_of_state import equation_of_state
+from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
 from sphcore.workgroups import launcher
 
@@ -31,18 +37,31 @@ def compute_density(spec, real=np.float32):
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
+    CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    hydrostatic_density, diffusion_term = density_diffusion(spec, real)
+    equation_of_state_ = equation_of_state(spec, real)
 
     @njit
-    def compute_density_main(i, params, particle_x, particle_rho, particle_p, cell_pyramid, cell_start,
-                             particle_id, particle_neighbours, obstacle_box):
+    def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
+                             particle_id, particle_neighbours, obstacle_box, particle_drho):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
             return
-        # [2] own position
+        # [2] own position; with continuity density also the velocity and the density (state)
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
         xi_z = particle_x[i, 2]
+        vi_x = real(0.0)
+        vi_y = real(0.0)
+        vi_z = real(0.0)
+        rhoi = real(0.0)
+        if CONTINUITY:
+            vi_x = particle_v[i, 0]
+            vi_y = particle_v[i, 1]
+            vi_z = particle_v[i, 2]
+            rhoi = particle_rho[i]
         # [3] wall images: within h of a wall, particle i also sees every particle mirrored across
         #     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
         #     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
@@ -50,16 +69,22 @@ def compute_density(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
-        # [4] sum (h^2 - r^2)^3 over every particle and image within h, self included (with
+        # [4] sum kernel_w over every particle and image within h, self included (with
         #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
         #     is within h of xi's own image xm, so the cells searched are those around xm.
+        #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
         sum_w = real(0.0)
+        sum_div = real(0.0)
+        sum_diffusion = real(0.0)
         found = 0
         fingerprint = 0
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
             xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -82,27 +107,60 @@ def compute_density(spec, real=np.float32):
                     r_z = xi_z - zk
                     r2 = r_x * r_x + r_y * r_y + r_z * r_z
                     if r2 < P.h2:
-                        q = P.h2 - r2
-                        sum_w += q * q * q
+                        if not CONTINUITY:
+                            sum_w += kernel_w(P, r2)
                         if NEIGHBOUR_STATS:
                             found += 1
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
-        # [6] rho_i = m sum_j W_poly6(r_ij, h)
+                    if not CONTINUITY or r2 >= P.h2 or (j == i and image == 0):
+                        continue
+                    # [6] continuity: the direction r_hat from the neighbour to i, as in compute_forces (where
+                    #     the two coincide: an image along its plane's inward normal, two particles along x,
+                    #     antisymmetrically in (i, j)); an image's velocity is mirrored on its flipped axes
+                    rlen = np.sqrt(r2)
+                    r_hat_x = real(-1.0) if i < j else real(1.0)
+                    r_hat_y = real(0.0)
+                    r_hat_z = real(0.0)
+                    if fx:
+                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
+                    if fy:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
+                    if fz:
+                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
+                    if rlen > real(0.0):
+                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    vj_x = particle_v[j, 0]
+                    vj_y = particle_v[j, 1]
+                    vj_z = particle_v[j, 2]
+                    vk_x = -vj_x if fx else vj_x
+                    vk_y = -vj_y if fy else vj_y
+                    vk_z = -vj_z if fz else vj_z
+                    v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
+                    # [7] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
+                    sum_div += kernel_gradient(P, r2, rlen) * v_r
+                    # [8] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
+                    #     image carries its particle's density, so its hydrostatic difference is its particle's
+                    if DENSITY_DIFFUSION > 0:
+                        sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x,
+                                                        particle_x[j, 1] - xi_y, particle_x[j, 2] - xi_z, r2, rlen)
+        # [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+        #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w
-        # [7] equation of state, clamped at 0 so that the free surface does not pull (tensile
-        #     instability); attraction, where a scene wants it, comes from the cohesion term.
-        #     linear: p = k (rho - rho_0) (seed 1); Tait: p = B ((rho / rho_0)^7 - 1) (Becker &
-        #     Teschner 2007, seed 2), the power by multiplications
-        p = P.stiffness * (rho - P.rest_density)
-        if TAIT:
-            ratio = rho / P.rest_density
-            ratio2 = ratio * ratio
-            ratio4 = ratio2 * ratio2
-            p = P.stiffness * (ratio4 * ratio2 * ratio - real(1.0))
-        p = max(p, real(0.0))
-        # [8] store
-        particle_rho[i] = rho
+        drho = real(0.0)
+        if CONTINUITY:
+            rho = rhoi
+            drho = -P.pressure_coef * sum_div
+            if DENSITY_DIFFUSION > 0:
+                drho += P.diffusion_coef * sum_diffusion
+        # [10] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+        #     density only)
+        p = equation_of_state_(P, rho)
+        # [11] store
+        if not CONTINUITY:
+            particle_rho[i] = rho
         particle_p[i] = p
+        if CONTINUITY:
+            particle_drho[i] = drho
         if NEIGHBOUR_STATS:
             particle_neighbours[i, 0] = found
             particle_neighbours[i, 1] = fingerprint

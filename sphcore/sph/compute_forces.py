@@ -1,4 +1,5 @@
-"""Acceleration from pressure (spiky gradient), viscosity (Mueller et al. 2003), surface
+"""Acceleration from pressure (spiky gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
+Monaghan 1992: viscosity.py; wall images' velocities: walls.py), surface
 tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
 Neighbours, wall and obstacle images as in compute_density; each optional term is compiled out by its
 closure constant, as the shader's by its specialization constant.
@@ -12,6 +13,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
+from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.viscosity import viscosity
 from sphcore.sph.walls import walls
@@ -23,11 +25,13 @@ from sphcore.workgroups import launcher
 def compute_forces(spec, real=np.float32):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
+    DFSPH = spec.DFSPH
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     image_velocity = walls(spec, real)[2]
     viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
@@ -95,7 +99,7 @@ def compute_forces(spec, real=np.float32):
                     rhoj = particle_rho[j]
                     pj = particle_p[j]
                     rlen = np.sqrt(r2)
-                    hr = P.h - rlen
+                    grad = kernel_gradient(P, r2, rlen)  # kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
                     # [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
                     #     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                     #     along its inward normal; two particles are pushed apart along x,
@@ -111,31 +115,32 @@ def compute_forces(spec, real=np.float32):
                         r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
                     if rlen > real(0.0):
                         r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
-                    # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky, the form that
-                    #     conserves momentum and energy with summation density (Monaghan 1992).
+                    # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
+                    #     conserves momentum and energy with summation or continuity density (Monaghan 1992).
                     #     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
                     #     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
-                    fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * hr * hr
-                    f_pressure_x += fp * r_hat_x
-                    f_pressure_y += fp * r_hat_y
-                    f_pressure_z += fp * r_hat_z
+                    fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * grad
+                    if not DFSPH:  # DFSPH: the pressure is the solver's (dfsph.glsl)
+                        f_pressure_x += fp * r_hat_x
+                        f_pressure_y += fp * r_hat_y
+                        f_pressure_z += fp * r_hat_z
                     # [8] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
                     #     artificial, Monaghan 1992); an image's velocity is the wall model's (walls.glsl:
                     #     free slip reverses its normal component, no slip all of it)
                     if VISCOSITY:
                         vk_x, vk_y, vk_z = image_velocity(particle_v[j, 0], particle_v[j, 1], particle_v[j, 2], image)
                         t_x, t_y, t_z = viscous_term(P, vi_x, vi_y, vi_z, vk_x, vk_y, vk_z, r_x, r_y, r_z, r2, rhoi,
-                                                     rhoj, hr * hr, hr, r_hat_x, r_hat_y, r_hat_z)
+                                                     rhoj, grad, kernel_laplacian(P, r2, rlen), r_hat_x, r_hat_y, r_hat_z)
                         f_viscosity_x += t_x
                         f_viscosity_y += t_y
                         f_viscosity_z += t_z
-                    # [9] cohesion: -kappa sum_j W_poly6(r_ij) (x_i - x_j) (equal masses), between real
+                    # [9] cohesion: -kappa sum_j W(r_ij) (x_i - x_j) (equal masses), between real
                     #     particles only: the walls are not wetted
                     if SURFACE_TENSION and image == 0:
-                        q = P.h2 - r2
-                        f_cohesion_x += q * q * q * r_x
-                        f_cohesion_y += q * q * q * r_y
-                        f_cohesion_z += q * q * q * r_z
+                        w = kernel_w(P, r2)
+                        f_cohesion_x += w * r_x
+                        f_cohesion_y += w * r_y
+                        f_cohesion_z += w * r_z
         # [10] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
         #      laminar sum is divided by rho_i, viscosity.glsl)
         a_x = f_pressure_x

@@ -1,5 +1,6 @@
 """Copy position, velocity and id into sorted order (scratch buffers); apply_order copies them
-back. One invocation per sorted position.
+back. With continuity density (CONTINUITY) the density is state and travels too. One invocation
+per sorted position.
 
 Mirror of shaders/sph/gather_particles.comp: same names, same statement order, same step labels.
 """
@@ -13,11 +14,13 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def gather_particles(spec, real=np.float32):
-    VERLET = spec.VERLET
+    CONTINUITY, VERLET = spec.CONTINUITY, spec.VERLET
+    DFSPH = spec.DFSPH
 
     @njit
     def gather_particles_main(k, params, particle_x, particle_v, particle_id, sorted_index,
-                              scratch_x, scratch_v, scratch_id, particle_a, particle_vh):
+                              scratch_x, scratch_v, scratch_id, particle_rho, scratch_rho, particle_a, particle_vh,
+                              particle_kappa):
         P = params[0]
         # [1] one invocation per sorted position
         if k >= P.n:
@@ -27,10 +30,14 @@ def gather_particles(spec, real=np.float32):
         scratch_x[k, :] = particle_x[j, :]
         scratch_v[k, :] = particle_v[j, :]
         scratch_id[k] = particle_id[j]
+        if CONTINUITY:
+            scratch_rho[k] = particle_rho[j]
         # [3] Verlet's half-step velocity (integrators.glsl) travels too, with particle_a as its scratch:
         #     nothing reads the acceleration before compute_forces rewrites it
         if VERLET:
             particle_a[k, :] = particle_vh[j, :]
-
+        # [4] DFSPH's warm start (dfsph.glsl) travels too, with scratch_rho as its scratch (no continuity density)
+        if DFSPH:
+            scratch_rho[k] = particle_kappa[j]
 
     return launcher(gather_particles_main)
