@@ -4,10 +4,12 @@ Vulkan: a GPU timestamp after every dispatch (vk_runner Timer), so each stage's 
 own, with no host in between; a device without timestamps on its compute queue is named, not
 profiled. numba: the host clock around each launch (a launch returns when its work is done).
 
-The roofline note beside each stage: the bytes of the buffers it binds (each read or written once:
-a lower bound on its memory traffic for the streaming stages) against the H200's 4.8 TB/s, and for
-the two pair loops the pair tests they make (every candidate in the 3^dim cells around a particle,
-wall images not counted) at an assumed FLOPS_PER_PAIR against its ~67 TFLOP/s of float32.
+The roofline note beside each stage: the bytes of the buffers it binds, each counted once, against
+the H200's 4.8 TB/s. That is what a streaming stage moves if it touches every buffer it binds; a
+stage that skips one (a term compiled out) moves less, and one whose data stays in the 50 MB L2 cache
+can beat the DRAM figure, so a share above 100 % says the stage is bound by neither. For the two pair
+loops: the pair tests they make (every candidate in the 3^dim cells around a particle, wall images
+not counted) at an assumed FLOPS_PER_PAIR, against the ~67 TFLOP/s of float32.
 """
 import json
 
