@@ -24,7 +24,7 @@ from sphcore.mc.reduce_cubes import reduce_cubes
 from sphcore.mc.sample_field import sample_field
 from sphcore.mc.tables import CASE_EDGES, CASE_VERTICES, CASE_WIDTH
 from sphcore.mc.write_arguments import write_arguments
-from sphcore.params import DEFAULT_SPEC, MC_PARAMS_DTYPE, SHADER_DIR, McSpec, pyramid_levels
+from sphcore.params import DEFAULT_SPEC, MC_PARAMS_DTYPE, SHADER_DIR, McSpec, kernel_coefficients, pyramid_levels
 from sphcore.workgroups import group_count
 
 METHODS = ("histopyramid", "per_cube")
@@ -401,6 +401,8 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
     state = empty_state(params, obstacles=scene["domain.obstacles"])  # the density sees their faces
     state["particle_x"][:, :3] = position
     cells = int(params[0]["cell_total"])
+    # the colour field needs the positions' summation density, whatever density the scene integrates
+    spec = spec._replace(CONTINUITY=False, DENSITY_DIFFUSION=0)
     sorter = make_backend(backend, params, state, neighbour_stages(cells) + [Stage("compute_density")], spec,
                           **({"device": device} if backend == "vulkan" else {}))
     try:
@@ -410,8 +412,10 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
         sorter.close()
     box = (np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])) if walls else None
     origin, shape = sample_grid(position, scene.h, spacing, box)
+    sph = params.copy()[0]  # sample_field sums poly6 (h^2 - r^2)^3: its coefficient, whatever the scene's kernel
+    sph["density_coef"] = scene.mass * kernel_coefficients(scene.h, 3)["poly6"]
     with Extractor(shape, (spacing,) * 3, origin, backend=backend, method=method, particles=len(position),
-                   cells=cells, sph=params[0], spec=spec, device=device) as extractor:
+                   cells=cells, sph=sph, spec=spec, device=device) as extractor:
         volume = extractor.field(sorted_state["particle_x"], sorted_state["particle_rho"],
                                  sorted_state["cell_pyramid"], sorted_state["cell_start"])
         mesh = weld(*extractor.extract(None, level))
