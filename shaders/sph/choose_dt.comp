@@ -1,13 +1,16 @@
 #version 460
-// The step's dt and the simulated time, on the device, one invocation (in the plan with
+// The step's dt and the simulated time, on the device, one work group (in the plan with
 // time.dt = "adaptive" or time.integrator = "verlet"). time_state[0] = (dt, the last step's dt,
 // time hi, time lo): integrate.comp reads dt and the last step's, the host reads the time only when
 // it writes output (no readback per step).
 //   ADAPTIVE_DT: dt = min(P.dt, cfl_number h / (c + |v|max), cfl_number sqrt(h / |a|max)) over the
 //   partials of reduce_dt.comp (Monaghan 1992's CFL and force bounds; P.dt is the viscous bound
 //   0.125 h^2 / nu, Morris et al. 1997), c^2 = k (Tait: 7 B / rho_0), cfl_number = 0.25 time.dt_fraction.
-//   Else dt = P.dt (Verlet needs the last step's dt: 0 at the first step).
-// Mirror: sphcore/sph/choose_dt.py (same names, same statement order, same step labels).
+//   The group's invocations share the partials (every local_size-th each) and reduce their maxima in
+//   shared memory as reduce_dt does: exact in any order. Else dt = P.dt (Verlet needs the last
+//   step's dt: 0 at the first step).
+// Mirror: sphcore/sph/choose_dt.py (same names, same statement order, same step labels; one local
+// loop per phase between barriers).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
@@ -17,22 +20,43 @@ layout(local_size_x_id = 0) in;
 layout(std430, binding = 20) buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 21) readonly buffer DtPartial { real dt_partial[]; };  // (|v|^2, |a|^2) per group
 
+shared real s_v2[gl_WorkGroupSize.x];
+shared real s_a2[gl_WorkGroupSize.x];
+
 void main() {
-    // [1] one invocation
-    if (gl_GlobalInvocationID.x != 0u) return;
-    float dt = P.dt;
+    // [1] the largest |v|^2 and |a|^2 of every local_size-th of reduce_dt's partials (one per work group
+    //     of its dispatch), from this invocation's on; one work group is dispatched
+    uint lid = gl_LocalInvocationID.x;
+    uint groups = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
+    real v2 = real(0.0);
+    real a2 = real(0.0);
     if (ADAPTIVE_DT) {
-        // [2] the largest |v|^2 and |a|^2 over reduce_dt's partials, one per work group of its dispatch
-        uint groups = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
-        real v2 = real(0.0);
-        real a2 = real(0.0);
-        for (uint g = 0u; g < groups; ++g) {
+        for (uint g = lid; g < groups; g += gl_WorkGroupSize.x) {
             v2 = max(v2, dt_partial[2u * g]);
             a2 = max(a2, dt_partial[2u * g + 1u]);
         }
+    }
+    s_v2[lid] = v2;
+    s_a2[lid] = a2;
+    barrier();
+    // [2] tree: at stride s, each invocation at a multiple of 2 s takes the larger of its own and the one s above
+    for (uint stride = 1u; stride < gl_WorkGroupSize.x; stride *= 2u) {
+        if (lid % (2u * stride) == 0u && lid + stride < gl_WorkGroupSize.x) {
+            s_v2[lid] = max(s_v2[lid], s_v2[lid + stride]);
+            s_a2[lid] = max(s_a2[lid], s_a2[lid + stride]);
+        }
+        barrier();
+    }
+    if (lid != 0u) return;
+    float dt = P.dt;
+    if (ADAPTIVE_DT) {
         // [3] the bounds: CFL on c + |v|max, force on |a|max (none where nothing accelerates), P.dt
+        v2 = s_v2[0];
+        a2 = s_a2[0];
         real c = sqrt(TAIT ? real(7.0) * P.stiffness / P.rest_density : real(P.stiffness));
         real bound = P.cfl_number * P.h / (c + sqrt(v2));
+        // (DFSPH, incompressible: the CFL on the particle speed alone, cfl_number = time.cfl_number dx / h)
+        if (DFSPH) bound = sqrt(v2) * real(P.dt) > P.cfl_number * P.h ? P.cfl_number * P.h / sqrt(v2) : real(P.dt);
         if (a2 > real(0.0)) bound = min(bound, P.cfl_number * sqrt(P.h / sqrt(a2)));
         dt = min(P.dt, float(bound));
     }
