@@ -92,7 +92,8 @@ SCHEMA = {
                                 "all_pairs (O(n^2), no grid)", "grid|all_pairs"),
         "equation_of_state": Key("linear", "", 0, 0, "linear: p = k (rho - rho_0) (seed 1); tait: "
                                  "p = B ((rho/rho_0)^7 - 1), B = rho_0 k / 7 (seed 2)", "linear|tait"),
-        "viscosity": Key(True, "", 0, 0, "Mueller's viscosity term (coefficient fluid.viscosity)", "bool"),
+        "viscosity": Key(True, "", 0, 0, "the viscosity term (physics.viscosity_model: Mueller's, coefficient "
+                         "fluid.viscosity, or Monaghan's artificial one, coefficient fluid.alpha)", "bool"),
         "surface_tension": Key(False, "", 0, 0, "cohesion of Becker & Teschner 2007 (coefficient "
                                "fluid.cohesion)", "bool"),
         "gravity": Key(True, "", 0, 0, "the gravity term (vector forces.gravity)", "bool"),

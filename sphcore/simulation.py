@@ -285,8 +285,9 @@ class Simulation:
         gap = min((state["particle_x"][i] - lo).min(), (hi - state["particle_x"][i]).min())
         if dt > dt_max:
             cause = f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s"
-        elif not (scene["physics.viscosity"] and scene["fluid.viscosity"] > 0):
-            cause = "no viscosity: nothing damps the particles' noise (raise fluid.viscosity)"
+        elif not (scene["physics.viscosity"] and scene.shear_viscosity > 0):
+            coefficient = "fluid.alpha" if scene["physics.viscosity_model"] == "artificial" else "fluid.viscosity"
+            cause = f"no viscosity: nothing damps the particles' noise (raise {coefficient})"
         elif scene["domain.boundary"] == "walls" and gap < scene["fluid.spacing"] / 2:
             cause = (f"particle {i} is {gap:.3g} m from a wall, closer than half a spacing, where its mirror images "
                      "(the walls' ghost particles) push it; a particle that starts on a wall is pushed by images "
