@@ -86,6 +86,8 @@ def design(quick=False, backends=("numba",), vulkan_on_cpu=True):
     # one along the resolution ladder
     points += [at(config=name) for name in CONFIGS if name != DEFAULT["config"]]
     points += [at(resolution=r, config=RECOMMENDED_CONFIG) for r in ladder if r != DEFAULT["resolution"]]
+    # issue 14: DFSPH beside the state equation at 16 and 25 too (at 40: its configuration above)
+    points += [at(resolution=r, config="dfsph") for r in (16, 25)]
     out = [p for p in points if "numba" in backends]
     if "vulkan" in backends:
         small = [at(resolution=r) for r in (10, 16, 25)] + [
