@@ -220,8 +220,12 @@ def test_plan_without_surface_tension_has_no_surface_tension_work():
     droplet = Scene.load("scenes/droplet_3d.toml")
     assert droplet.spec.SURFACE_TENSION and not droplet.spec.GRAVITY and not droplet.spec.WALLS
     # all pairs: no grid stage at all; the grid: count, one reduction per pyramid level, offsets, sort
-    all_pairs = Scene.from_dict({**scene.config, "physics": {**scene.config["physics"], "neighbour_search": "all_pairs"}})
+    tank = Scene.load("scenes/tank_3d.toml")  # the default (graphics) model: no density or dt stages
+    all_pairs = Scene.from_dict({**tank.config, "physics": {**tank.config["physics"], "neighbour_search": "all_pairs"}})
     assert [s.name for s in plan(all_pairs)] == ["compute_density", "compute_forces", "integrate"]
+    # the engineering model of dam_break_3d adds the continuity density and the device's dt
+    assert [s.name for s in plan(scene) if s.name not in {t.name for t in plan(tank)}] == [
+        "integrate_density", "reduce_dt", "choose_dt"]
     levels = pyramid_levels(int(np.prod(scene.grid_dim)))[0]
     assert [s.level for s in plan(scene) if s.name == "reduce_cells"] == list(range(1, levels + 1))
     assert Stage("count_cells") in plan(scene)
