@@ -25,6 +25,7 @@ def main():
     ap.add_argument("--t-end", type=float, default=2.0)
     ap.add_argument("--backend", default="numba")
     ap.add_argument("--max-density-error", type=float, default=0.001)
+    ap.add_argument("--dt-fraction", type=float, default=1.0, help="of the largest step (time.dt_fraction)")
     ap.add_argument("--out")
     args = ap.parse_args()
     base = tank_scene({"resolution": args.resolution})
@@ -32,6 +33,7 @@ def main():
     config["physics"]["pressure_solver"] = "dfsph"
     config["fluid"]["max_density_error"] = args.max_density_error
     config["time"]["dt"] = "auto"
+    config["time"]["dt_fraction"] = args.dt_fraction
     scene = Scene.from_dict(config)
     rho0 = scene["fluid.rest_density"]
     samples, wall = [], 0.0
