@@ -29,11 +29,17 @@ def cmd_run(args):
         out = Path(args.out or Path("runs") / scene["name"])
     backend = args.backend or (str(checkpoint["backend"]) if checkpoint is not None else "numba")
     options = {"local_size": args.local_size}
+    if args.profile:
+        from sphcore.profile import Profile
+        options["profile"] = Profile()
     if backend == "vulkan":
         options.update(device=args.device, validation=args.validation or None)
     arrays = run(scene, backend, steps=args.steps, out_dir=out, checkpoint=checkpoint, overwrite=args.overwrite,
                  **options)
     resumed = f" (resumed at step {int(checkpoint['step'])})" if checkpoint is not None else ""
+    if args.profile:
+        from sphcore.profile import report
+        print(report(options["profile"], scene, arrays["position"], out))
     print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed}, "
           f"t = {float(arrays['time']):.4g} s -> {out}/final.npz, {out}/{scene['name']}.pvd")
 
@@ -100,6 +106,8 @@ def main(argv=None):
     p.add_argument("--local-size", type=int, default=128, help="work-group size (specialization constant)")
     p.add_argument("--device", help="Vulkan device: index or part of its name (default: a discrete GPU, else any)")
     p.add_argument("--validation", action="store_true", help="enable the Vulkan validation layers")
+    p.add_argument("--profile", action="store_true",
+                   help="time every stage of the step (Vulkan: GPU timestamps) and write RUN_DIR/profile.json")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the run already in --out (its checkpoint, snapshots and final state are deleted)")
     p.set_defaults(func=cmd_run)

@@ -48,3 +48,14 @@ def test_pair_tests_count_every_candidate_in_the_cells_around(boundary):
     if boundary == "open":
         d = np.minimum(d, dims - d)  # neighbouring across the period
     assert pair_tests(scene, x) == int((d <= 1).all(axis=2).sum())
+
+
+def test_run_profile_prints_and_saves_the_table(tmp_path, capsys):
+    import json
+
+    from sphcore.cli import main
+    assert main(["run", "tank_2d", "--steps", "3", "--out", str(tmp_path / "run"), "--profile"]) == 0
+    out = capsys.readouterr().out
+    assert "per-stage profile on cpu (numba), 3 steps" in out and "compute_forces" in out
+    saved = json.loads((tmp_path / "run" / "profile.json").read_text())
+    assert saved["steps"] == 3 and {r["stage"] for r in saved["stages"]} == {s.name for s in plan(Scene.load("tank_2d"))}
