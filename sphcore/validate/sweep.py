@@ -106,6 +106,7 @@ def label(row):
     """A short name of a point: its values that differ from DEFAULT."""
     short = {"resolution": "res", "dt_fraction": "dt x", "equation_of_state": "", "stiffness": "k",
              "neighbour_search": "", "precision": "", "backend": "", "alpha": "alpha", "t_end": "t_end", "config": ""}
+    row = {**DEFAULT, **row}  # a table written before an axis existed has its default
     parts = [f"{short[k]} {row[k]:g}".strip() if isinstance(row[k], (int, float)) else str(row[k])
              for k in POINT_KEYS if row[k] != DEFAULT[k]]
     return ", ".join(parts) or "default"
