@@ -67,9 +67,11 @@ def test_one_particle_falls_freely_and_stays_inside(tmp_path):
 def test_two_coincident_particles_stay_finite_and_fall_together():
     """r = 0 between them must not give NaN (normalize(0)); two particles alone are far below the
     rest density, so their pressure is clamped to 0 and nothing pushes them apart."""
-    scene, _, _ = stability.cases()["two_coincident"]
+    scene, positions, _ = stability.cases()["two_coincident"]
     sim = Simulation(scene)
+    stability.place(sim, positions(scene))
     x0 = sim.read()["particle_x"]
+    assert np.array_equal(x0[0], x0[1])
     sim.advance(20)
     state = sim.read()
     sim.close()
