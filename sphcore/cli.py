@@ -12,6 +12,11 @@ from sphcore.paths import SCENE_DIR  # noqa: F401 (tests and scripts import it f
 from sphcore.scene import scene_path
 
 
+def printable(message):
+    """`message` with control characters other than newlines escaped (a file name may hold any)."""
+    return "".join(c if c.isprintable() or c == "\n" else repr(c)[1:-1] for c in str(message))
+
+
 def cmd_run(args):
     from sphcore.scene import Scene
     from sphcore.simulation import CheckpointError, load_checkpoint, run
@@ -155,13 +160,14 @@ def main(argv=None):
     try:
         args.func(args)
     except (SceneError, SimulationError, VulkanError, ShaderCompileError) as e:
-        print(f"sphcore: error: {e}", file=sys.stderr)
+        print(f"sphcore: error: {printable(e)}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # output piped into a reader that stopped early (`sphcore keys | head`)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except OSError as e:  # a folder that is a file, a full disk, no permission: files already written are kept
-        print(f"sphcore: error: {e.filename + ': ' if e.filename else ''}{e.strerror or e}", file=sys.stderr)
+        print(f"sphcore: error: {printable(str(e.filename) + ': ' if e.filename else '')}{e.strerror or e}",
+              file=sys.stderr)
         return 1
     except MemoryError as e:  # past the estimate of sphcore.memory: files already written are kept
         print(f"sphcore: error: out of memory ({str(e) or 'MemoryError'}); files written so far are complete",

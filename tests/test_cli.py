@@ -207,3 +207,9 @@ def test_unknown_scene_name_lists_the_shipped_scenes(capsys):
     err = capsys.readouterr().err
     assert "'dam_brake_2d': no such scene file, and no shipped scene of that name" in err
     assert "dam_break_2d, dam_break_3d" in err and len(err.strip().splitlines()) == 1
+
+
+def test_control_characters_in_a_name_stay_on_one_line(capsys):
+    assert main(["plot", "\x1e"]) == 1
+    err = capsys.readouterr().err
+    assert err.splitlines() == [err.rstrip("\n")] and err.startswith("sphcore: error: \\x1e/final.npz")
