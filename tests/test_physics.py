@@ -47,7 +47,10 @@ def test_tank_at_rest_is_hydrostatic_and_stays_so(open_backend, dim, backend):
     scene = tank(dim)
     state, params, stages, spec = scene_state(scene)
     sim = open_backend(backend, params, state, stages, spec)
-    sim.step(3000)  # 0.3 s: about ten sound crossings of the 0.12-0.2 m column, viscous settling
+    # 0.3 s (2D) or 0.55 s (3D): ten or more sound crossings of the 0.12-0.2 m column, viscous settling
+    # (the graphics model's column mode is barely damped: in 3D its slope was 1.29 rho g over
+    # 0.3-0.55 s after a change of rounding in the pressure term, 1.15 after)
+    sim.step(3000 if dim == 2 else 5500)
     first, speed1, drho1 = window_slope(sim, scene, 2500)
     second, speed2, drho2 = window_slope(sim, scene, 2500)
     # Pressure grows as rho g depth. Measured: 1.1-1.2 rho g in 2D and 3D at h = 2 dx with
