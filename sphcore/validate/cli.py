@@ -124,6 +124,16 @@ def positive(kind):
     return parse
 
 
+def add_model_options(d):
+    """The options the pressure cases share beside their own: precision, equation of state, alpha,
+    dt fraction and the physics switches."""
+    d.add_argument("--precision", choices=["float32", "float64"])
+    d.add_argument("--equation-of-state", choices=["linear", "tait"])
+    d.add_argument("--alpha", type=positive(float), help="viscosity alpha (default 0.02)")
+    d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
+    add_physics_options(d)
+
+
 def add_physics_options(p):
     """--config and the physics switches of issue 12 (sphcore.validate.configs)."""
     from sphcore.validate import configs
@@ -174,11 +184,7 @@ def add_commands(sub):
     d.add_argument("--device", help="Vulkan device: index or part of its name")
     d.add_argument("--resolution", type=positive(int), help="particles per column height H = 0.6 m (default 40)")
     d.add_argument("--t-end-star", type=positive(float), help="simulated t sqrt(g/H) (default 7.3, the data's end)")
-    d.add_argument("--precision", choices=["float32", "float64"])
-    d.add_argument("--equation-of-state", choices=["linear", "tait"])
-    d.add_argument("--alpha", type=positive(float), help="viscosity alpha (default 0.02)")
-    d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
-    add_physics_options(d)
+    add_model_options(d)
     d.set_defaults(func=cmd_dam_break_pressure)
     d = cases.add_parser("tank", help="water at rest: the settled pressure against rho g depth")
     d.add_argument("--out", required=True, help="output folder (tank.csv, .json, .png)")
@@ -186,11 +192,7 @@ def add_commands(sub):
     d.add_argument("--device", help="Vulkan device: index or part of its name")
     d.add_argument("--resolution", type=positive(int), help="particles per depth (0.6 m; default 30)")
     d.add_argument("--t-end", type=positive(float), help="simulated seconds of settling (default 2)")
-    d.add_argument("--precision", choices=["float32", "float64"])
-    d.add_argument("--equation-of-state", choices=["linear", "tait"])
-    d.add_argument("--alpha", type=positive(float), help="viscosity alpha (default 0.02)")
-    d.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 1)")
-    add_physics_options(d)
+    add_model_options(d)
     d.set_defaults(func=cmd_tank)
     d = cases.add_parser("stability", help="the stability matrix: every parameter at its extremes")
     d.add_argument("--out", required=True, help="output folder (a folder of snapshots per case, stability.json/.csv)")
