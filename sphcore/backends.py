@@ -25,7 +25,8 @@ from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
-from sphcore.sph.dfsph import SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.dfsph import (CONTROL_SIZE, DISPATCH_CHECK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START,
+                               dispatch_base)
 from sphcore.sph.dfsph_check import dfsph_check
 from sphcore.sph.dfsph_factor import dfsph_factor
 from sphcore.sph.dfsph_residual import dfsph_residual
@@ -68,14 +69,16 @@ BUFFERS = {
     "dt_partial": (REAL, 2, "particles"),
     "particle_alpha": (REAL, 1, "particles"),
     "particle_residual": (REAL, 1, "particles"),
-    "dfsph_control": (np.uint32, 1, 16),
+    "dfsph_control": (np.uint32, 1, CONTROL_SIZE),
     "dfsph_state": (np.float32, 1, 8),
     "dfsph_history": (np.float32, 8, 256),
     "particle_kappa": (REAL, 1, "particles"),
+    "dfsph_partial": (REAL, 1, "particles"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
 # particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
+# dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
 # dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
@@ -117,22 +120,23 @@ STAGES = {
                                                  "particle_kappa")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "cell_pyramid", "cell_start", "obstacle_box", "time_state",
-                                                     "particle_residual", "dfsph_control")),
+                                                     "particle_residual", "dfsph_partial")),
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "cell_pyramid", "cell_start", "obstacle_box",
                                                      "time_state", "particle_alpha", "particle_residual",
                                                      "dfsph_control", "particle_kappa")),
-    "dfsph_check": (dfsph_check, "one", ("time_state", "particle_residual", "dfsph_control", "dfsph_state",
-                                         "dfsph_history")),
+    "dfsph_check": (dfsph_check, "one", ("time_state", "dfsph_control", "dfsph_state", "dfsph_history",
+                                         "dfsph_partial")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
                                            "time_state")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
                                                            "time_state")),
 }
 
-Stage = namedtuple("Stage", "name level")  # level: the HistoPyramid level a reduce_cells builds, the solve of a
-#                                            DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), else 0
-Stage.__new__.__defaults__ = (0,)
+Stage = namedtuple("Stage", "name level indirect")  # level: the HistoPyramid level a reduce_cells builds, the
+#   solve of a DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), else 0; indirect: its work
+#   groups are read from dfsph_control when it runs (indirect_offset), as vkCmdDispatchIndirect does
+Stage.__new__.__defaults__ = (0, False)
 
 
 def neighbour_stages(cell_total):
@@ -167,10 +171,15 @@ def plan(scene):
 
 def dfsph_solve(solve, iterations):
     """One DFSPH solve as recorded: the residual and its check, then `iterations` times an update, the
-    residual and the check. Once a check stops the solve, the rest of its stages return at once: the
-    loop ends on the device, with no readback, and both backends run the same updates."""
+    residual and the check, dispatched indirectly. Once a check stops the solve, it zeroes their group
+    counts: the loop ends on the device, with no readback, and both backends run the same updates."""
     return ([Stage("dfsph_residual", solve), Stage("dfsph_check", solve)]
-            + [Stage("dfsph_velocity", solve), Stage("dfsph_residual", solve), Stage("dfsph_check", solve)] * iterations)
+            + [Stage(name, solve, True) for name in ("dfsph_velocity", "dfsph_residual", "dfsph_check")] * iterations)
+
+
+def indirect_offset(stage):
+    """The index in dfsph_control of an indirect stage's (x, y, z) work group counts (dfsph.glsl)."""
+    return dispatch_base(stage.level) + (DISPATCH_CHECK if STAGES[stage.name][1] == "one" else 0)
 
 
 def buffer_dtype(name, precision="float32"):
@@ -275,8 +284,18 @@ class NumbaBackend:
             profile.device = "cpu (numba)"
         self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
-        self._launch = [(STAGES[s.name][0](spec, self.real), group_count(dispatch_size(s, params), local_size),
-                         stage_params(params, s), [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
+        self._launch = [(STAGES[s.name][0](spec, self.real), self._groups(s), stage_params(params, s),
+                         [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
+
+    def _groups(self, stage):
+        """A stage's work groups, or for an indirect one the index in dfsph_control to read them from
+        (as a negative number: -1 - index)."""
+        if stage.indirect:
+            return -1 - indirect_offset(stage)
+        return group_count(dispatch_size(stage, self.params), self.local_size)
+
+    def _launch_groups(self, groups):
+        return groups if groups >= 0 else int(self.state["dfsph_control"][-1 - groups])
 
     def warm_up(self, after_each=None):
         """Compile every stage of the plan without running it (a launch of no work groups: numba
@@ -289,21 +308,21 @@ class NumbaBackend:
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
         launch = STAGES[stage.name][0](self.spec, self.real)
-        launch(group_count(dispatch_size(stage, self.params), self.local_size), self.local_size,
-               stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
+        launch(self._launch_groups(self._groups(stage)), self.local_size, stage_params(self.params, stage),
+               *(self.state[k] for k in STAGES[stage.name][2]))
 
     def step(self, count=1):
         if self.profile is not None:
             return self._profiled_step(count)
         for _ in range(count):
             for launch, groups, params, buffers in self._launch:
-                launch(groups, self.local_size, params, *buffers)
+                launch(self._launch_groups(groups), self.local_size, params, *buffers)
 
     def _profiled_step(self, count):
         for _ in range(count):
             for stage, (launch, groups, params, buffers) in zip(self.stages, self._launch):
                 start = time.perf_counter()
-                launch(groups, self.local_size, params, *buffers)
+                launch(self._launch_groups(groups), self.local_size, params, *buffers)
                 self.profile.add(stage.name, time.perf_counter() - start)
         self.profile.steps += count
 
@@ -377,8 +396,12 @@ class VulkanBackend:
                 rec.timestamp(rec.timer, 0)
             for s in range(steps):
                 for k, stage in enumerate(stages):
-                    rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
-                                 dispatch_size(stage, self.params))
+                    if stage.indirect:
+                        rec.dispatch_indirect(self.pipelines[stage.name], stage_params(self.params, stage),
+                                              self.buffers["dfsph_control"], 4 * indirect_offset(stage))
+                    else:
+                        rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
+                                     dispatch_size(stage, self.params))
                     rec.barrier()
                     if timed:
                         rec.timestamp(rec.timer, 1 + s * len(stages) + k)

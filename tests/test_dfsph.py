@@ -16,7 +16,8 @@ from sphcore.backends import empty_state, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation, run
-from sphcore.sph.dfsph import SOLVE_DENSITY, SOLVE_DIVERGENCE
+from sphcore.sph.dfsph import SOLVE_DENSITY, SOLVE_DIVERGENCE, dispatch_base
+from sphcore.workgroups import group_count
 
 # a 2D water column (10 x 10 particles) in a 0.3 m x 0.2 m tank: it starts to collapse
 SCENE = {
@@ -87,6 +88,13 @@ def test_solver_stages_agree_and_count_the_same_iterations():
             gap = np.abs(a.pop("particle_residual") - b.pop("particle_residual")).max()
             assert gap <= 8 * np.finfo(np.float32).eps, f"after {stage}: particle_residual differs by {gap:g}"
             assert_stage_agrees(a, b, stage, STAGE_RTOL)
+            if stage.name == "dfsph_factor":  # the step starts both solves' indirect dispatches
+                groups = group_count(len(a["particle_x"]), cpu.backend.local_size)
+                for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY):
+                    base = dispatch_base(solve)
+                    assert list(a["dfsph_control"][base:base + 7]) == [groups, 1, 1, 0, 1, 1, 1]
+        for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY):  # both stopped: the rest of the budget dispatched nothing
+            assert a["dfsph_control"][dispatch_base(solve)] == a["dfsph_control"][dispatch_base(solve) + 4] == 0
         cpu.step_count = gpu.step_count = 1
         for sim in (cpu, gpu):
             sim.solver_log.collect(sim.backend, 0, 1)

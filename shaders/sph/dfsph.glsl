@@ -10,9 +10,13 @@
 //   -> constant-density solve (solve 2) -> integrate (v += dt a, x += dt v).
 // A solve is dfsph_residual, dfsph_check, then max_iterations times [dfsph_velocity, dfsph_residual,
 // dfsph_check], all recorded into the command buffer (no readback). The stage's solve is P.level
-// (1 or 2; for reduce_cells P.level is a pyramid level). dfsph_check reduces the mean residual in a
-// fixed order and, once it is under the tolerance (after the minimum iterations) or the budget is
-// spent, sets the solve's done flag: every later stage of that solve returns at once.
+// (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order
+// in two levels: each dfsph_residual work group sums its residuals in order (dfsph_partial), and
+// dfsph_check, one work group, sums those. Once the mean is under the tolerance (after the minimum
+// iterations) or the budget is spent, dfsph_check sets the solve's done flag and zeroes its group
+// counts: the solve's later stages are indirect dispatches (vkCmdDispatchIndirect) that read those
+// counts, so the rest of the recorded budget dispatches no work groups. dfsph_factor sets the counts
+// at the start of every step.
 // With V_j = m / rho_0 and V grad_i W_ij = -(pressure_coef / rho_0) kernel_gradient r_hat_ij:
 //   alpha_i = 1 / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2)                     (dfsph_factor)
 //   d_i = sum_j V (v_i - v_j) . grad W_ij, the density ratio's rate                   (dfsph_residual)
@@ -40,7 +44,12 @@ const uint CONTROL_FAILURES = 6u;       // solves that spent their budget unconv
 const uint CONTROL_FAILED_STEP = 7u;    // the first of them: its step (1 = the first step)
 const uint CONTROL_FAILED_SOLVE = 8u;   //   and its solve
 const uint CONTROL_MAX_ITERATIONS = 9u; // fluid.max_iterations (host)
-const uint CONTROL_SIZE = 16u;
+const uint CONTROL_DISPATCH = 16u;      // [dispatch_base(solve)]: the solve's indirect dispatch arguments,
+const uint DISPATCH_CHECK = 4u;         //   (x, y, z) work groups of its dfsph_velocity and dfsph_residual,
+                                        //   and at + DISPATCH_CHECK those of its dfsph_check
+const uint CONTROL_SIZE = 32u;
+
+uint dispatch_base(uint solve) { return CONTROL_DISPATCH + 8u * (solve - 1u); }
 
 // dfsph_state (float): tolerances (host) and errors
 const uint STATE_TOLERANCE = 0u;        // [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error

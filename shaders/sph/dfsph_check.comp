@@ -1,11 +1,13 @@
 #version 460
 // DFSPH's convergence test of solve P.level (dfsph.glsl), one work group: the mean residual, summed in a
-// fixed order (each invocation its strided share in index order, then invocation 0 the shares in order:
-// no atomics, the same bits on every run and, up to the arithmetic's rounding, on both backends), is the
-// solve's error (divergence-free: times dt). Once it is under the solve's tolerance after its minimum
-// iterations, or fluid.max_iterations updates are spent, the solve's done flag is set and every later
-// stage of the solve returns at once; a solve stopped unconverged is counted and the first one recorded
-// (step, solve, error). The constant-density solve's stop ends the step: a row of dfsph_history.
+// fixed order (dfsph_residual's work groups' sums, dfsph_partial; each invocation its strided share of
+// them in index order, then invocation 0 the shares in order: no atomics, the same bits on every run
+// and, up to the arithmetic's rounding, on both backends), is the solve's error (divergence-free: times
+// dt). Once it is under the solve's tolerance after its minimum iterations, or fluid.max_iterations
+// updates are spent, the solve's done flag is set and its indirect dispatches' work groups are zeroed:
+// the rest of its recorded iterations dispatch nothing. A solve stopped unconverged is counted and the
+// first one recorded (step, solve, error). The constant-density solve's stop ends the step: a row of
+// dfsph_history.
 // Mirror: sphcore/sph/dfsph_check.py (same names, same statement order, same step labels; one local loop
 // per phase between barriers).
 #extension GL_GOOGLE_include_directive : require
@@ -16,21 +18,21 @@ layout(local_size_x_id = 0) in;
 #include "dfsph.glsl"
 
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
-layout(std430, binding = 23) readonly buffer ParticleResidual { real particle_residual[]; };
 layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 25) buffer DfsphState { float dfsph_state[]; };
 layout(std430, binding = 26) writeonly buffer DfsphHistory { float dfsph_history[]; };
+layout(std430, binding = 28) readonly buffer DfsphPartial { real dfsph_partial[]; };
 
 shared real s_sum[gl_WorkGroupSize.x];
 
 void main() {
-    // [1] the solve; nothing once it has stopped (the flag is the same for every invocation)
+    // [1] the solve (no work group once it has stopped: its dispatch is indirect); dfsph_residual's groups
     uint lid = gl_LocalInvocationID.x;
     uint solve = P.level;
-    if (dfsph_control[CONTROL_DONE + solve] != 0u) return;
-    // [2] each invocation sums the residuals lid, lid + L, lid + 2 L, ... in index order
+    uint groups = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
+    // [2] each invocation sums the groups' sums lid, lid + L, lid + 2 L, ... in index order
     real sum = real(0.0);
-    for (uint k = lid; k < P.n; k += gl_WorkGroupSize.x) sum += particle_residual[k];
+    for (uint k = lid; k < groups; k += gl_WorkGroupSize.x) sum += dfsph_partial[k];
     s_sum[lid] = sum;
     barrier();
     // [3] invocation 0: the shares in order, their mean: the error (divergence-free: times dt, the last
@@ -46,6 +48,8 @@ void main() {
     bool converged = iterations >= least && error <= dfsph_state[STATE_TOLERANCE + solve];
     if (!converged && iterations < dfsph_control[CONTROL_MAX_ITERATIONS]) return;
     dfsph_control[CONTROL_DONE + solve] = 1u;
+    dfsph_control[dispatch_base(solve)] = 0u;
+    dfsph_control[dispatch_base(solve) + DISPATCH_CHECK] = 0u;
     dfsph_state[STATE_ERROR + solve] = error;
     // [5] a solve that spent its budget unconverged: counted, the first one recorded
     if (!converged) {

@@ -2,7 +2,8 @@
 // DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11), one invocation per particle, after
 // compute_density: alpha_i = 1 / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2), V = m / rho_0, over the
 // neighbours and their wall and obstacle images (as in compute_density). Also starts the step's two
-// solves (dfsph.glsl): invocation 0 clears their done flags and iteration counts; every particle's
+// solves (dfsph.glsl): invocation 0 clears their done flags and iteration counts and sets their indirect
+// dispatches' work groups (one invocation per particle, and one group for the check); every particle's
 // pressure is cleared and its stiffness sum scaled to the warm start (WARM_START).
 // Mirror: sphcore/sph/dfsph_factor.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
@@ -34,6 +35,15 @@ void main() {
         dfsph_control[CONTROL_DONE + SOLVE_DENSITY] = 0u;
         dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0u;
         dfsph_control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0u;
+        for (uint solve = SOLVE_DIVERGENCE; solve <= SOLVE_DENSITY; ++solve) {
+            uint base = dispatch_base(solve);
+            dfsph_control[base] = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
+            dfsph_control[base + 1u] = 1u;
+            dfsph_control[base + 2u] = 1u;
+            dfsph_control[base + DISPATCH_CHECK] = 1u;
+            dfsph_control[base + DISPATCH_CHECK + 1u] = 1u;
+            dfsph_control[base + DISPATCH_CHECK + 2u] = 1u;
+        }
     }
     // [2] own position; wall and obstacle images as in compute_density
     real3 xi = particle_x[i].xyz;

@@ -5,9 +5,12 @@
 //   divergence-free solve: r_i = max(d_i, 0) [1/s], with the velocity v;
 //   constant-density solve: r_i = max(rho_i / rho_0 + dt d_i - 1, 0), with v* = v + dt a (the velocity
 //   the step would integrate) and this step's dt (time_state, choose_dt.comp).
-// Only compression is corrected (a free surface's density deficit is not a tension). Returns at once
-// once the solve has stopped (dfsph_check.comp).
-// Mirror: sphcore/sph/dfsph_residual.py (same names, same statement order, same step labels).
+// Only compression is corrected (a free surface's density deficit is not a tension). Invocation 0 of
+// each work group sums the group's residuals in order into dfsph_partial, the first level of the mean
+// that dfsph_check.comp reduces. A solve's iterations are dispatched indirectly: no work groups once it
+// has stopped.
+// Mirror: sphcore/sph/dfsph_residual.py (same names, same statement order, same step labels; one
+// local loop per phase between barriers).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
@@ -28,73 +31,85 @@ layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; }
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_residual[]; };
-layout(std430, binding = 24) readonly buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 28) writeonly buffer DfsphPartial { real dfsph_partial[]; };
+
+shared real s_residual[gl_WorkGroupSize.x];
 
 void main() {
-    // [1] one invocation per particle; nothing once the solve has stopped
+    // [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
+    //     invocation of the group reaches the barrier, with a residual of 0 past the last particle
     uint i = gl_GlobalInvocationID.x;
-    if (i >= P.n) return;
+    uint lid = gl_LocalInvocationID.x;
     uint solve = P.level;
-    if (dfsph_control[CONTROL_DONE + solve] != 0u) return;
-    // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
-    real dt = real(time_state[0].x);
-    real kick = solve == SOLVE_DENSITY ? dt : real(0.0);
-    real3 xi = particle_x[i].xyz;
-    real3 vi = particle_v[i].xyz + kick * particle_a[i].xyz;
-    // [3] wall and obstacle images as in compute_density
-    real3 wall;
-    uint mirrored = near_walls(xi, wall);
-    real3 inward;
-    mirrored = near_obstacles(xi, mirrored, wall, inward);
-    // [4] d_i over every other particle and every image within h
-    real coef = real(P.pressure_coef) / real(P.rest_density);
-    real d = real(0.0);
-    for (uint image = 0u; image < 8u; ++image) {
-        if ((image & ~mirrored) != 0u) continue;
-        bool fx = (image & 1u) != 0u;
-        bool fy = (image & 2u) != 0u;
-        bool fz = (image & 4u) != 0u;
-        real3 xm = reflected(xi, wall, image);
-        ivec3 base = cell_of(xm);
-        // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
-        for (uint k = 0u; k < range_count(); ++k) {
-            uint start = 0u;
-            uint end = P.n;
-            if (GRID) {
-                int first;
-                int last;
-                if (!range_cells(base, k, first, last)) continue;
-                start = cell_start[first];
-                end = cell_start[last] + cell_pyramid[last];
-            }
-            for (uint j = start; j < end; ++j) {
-                if (j == i && image == 0u) continue;
-                real3 xk = reflected(particle_x[j].xyz, wall, image);
-                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
-                real3 r = xi - xk;
-                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-                if (r2 >= P.h2) continue;
-                real rlen = sqrt(r2);
-                // [6] direction from the neighbour to i, as in compute_forces
-                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
-                if (fy) r_hat = real3(0.0, inward.y, 0.0);
-                if (fz) r_hat = real3(0.0, 0.0, inward.z);
-                if (rlen > real(0.0)) r_hat = r / rlen;
-                // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
-                real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
-                real vk_x = fx ? -vj.x : vj.x;
-                real vk_y = fy ? -vj.y : vj.y;
-                real vk_z = fz ? -vj.z : vj.z;
-                real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
-                // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-                d -= coef * kernel_gradient(r2, rlen) * v_r;
+    real residual = real(0.0);
+    if (i < P.n) {
+        // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
+        real dt = real(time_state[0].x);
+        real kick = solve == SOLVE_DENSITY ? dt : real(0.0);
+        real3 xi = particle_x[i].xyz;
+        real3 vi = particle_v[i].xyz + kick * particle_a[i].xyz;
+        // [3] wall and obstacle images as in compute_density
+        real3 wall;
+        uint mirrored = near_walls(xi, wall);
+        real3 inward;
+        mirrored = near_obstacles(xi, mirrored, wall, inward);
+        // [4] d_i over every other particle and every image within h
+        real coef = real(P.pressure_coef) / real(P.rest_density);
+        real d = real(0.0);
+        for (uint image = 0u; image < 8u; ++image) {
+            if ((image & ~mirrored) != 0u) continue;
+            bool fx = (image & 1u) != 0u;
+            bool fy = (image & 2u) != 0u;
+            bool fz = (image & 4u) != 0u;
+            real3 xm = reflected(xi, wall, image);
+            ivec3 base = cell_of(xm);
+            // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            for (uint k = 0u; k < range_count(); ++k) {
+                uint start = 0u;
+                uint end = P.n;
+                if (GRID) {
+                    int first;
+                    int last;
+                    if (!range_cells(base, k, first, last)) continue;
+                    start = cell_start[first];
+                    end = cell_start[last] + cell_pyramid[last];
+                }
+                for (uint j = start; j < end; ++j) {
+                    if (j == i && image == 0u) continue;
+                    real3 xk = reflected(particle_x[j].xyz, wall, image);
+                    if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                    real3 r = xi - xk;
+                    real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                    if (r2 >= P.h2) continue;
+                    real rlen = sqrt(r2);
+                    // [6] direction from the neighbour to i, as in compute_forces
+                    real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
+                    if (fx) r_hat = real3(inward.x, 0.0, 0.0);
+                    if (fy) r_hat = real3(0.0, inward.y, 0.0);
+                    if (fz) r_hat = real3(0.0, 0.0, inward.z);
+                    if (rlen > real(0.0)) r_hat = r / rlen;
+                    // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+                    real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
+                    real vk_x = fx ? -vj.x : vj.x;
+                    real vk_y = fy ? -vj.y : vj.y;
+                    real vk_z = fz ? -vj.z : vj.z;
+                    real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+                    // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+                    d -= coef * kernel_gradient(r2, rlen) * v_r;
+                }
             }
         }
+        // [9] the residual: compression only
+        residual = max(d, real(0.0));
+        if (solve == SOLVE_DENSITY) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
+        // [10] store
+        particle_residual[i] = residual;
     }
-    // [9] the residual: compression only
-    real residual = max(d, real(0.0));
-    if (solve == SOLVE_DENSITY) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
-    // [10] store
-    particle_residual[i] = residual;
+    s_residual[lid] = residual;
+    barrier();
+    // [11] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+    if (lid != 0u) return;
+    real total = real(0.0);
+    for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_residual[k];
+    dfsph_partial[gl_WorkGroupID.x] = total;
 }

@@ -6,7 +6,7 @@
 // velocity (divergence-free) or to the acceleration the step integrates (constant density, which also
 // accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's m p_i / rho_i^2 = V s_i).
 // Every invocation reads only the residuals and writes only its own particle: a Jacobi sweep.
-// Returns at once once the solve has stopped; invocation 0 counts the update.
+// Dispatched indirectly: no work groups once the solve has stopped; invocation 0 counts the update.
 // Mirror: sphcore/sph/dfsph_velocity.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -34,12 +34,12 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 
 void main() {
-    // [1] one invocation per particle; nothing once the solve has stopped; invocation 0 counts the update
+    // [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
+    //     invocation 0 counts the update
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     uint solve = P.level;
     bool warm = solve == SOLVE_WARM_START;  // the warm start: always, and not counted
-    if (!warm && dfsph_control[CONTROL_DONE + solve] != 0u) return;
     if (!warm && i == 0u) dfsph_control[CONTROL_ITERATIONS + solve] += 1u;
     // [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
     //     start: the stiffness sum, particle_kappa, where the particle is compressed: residual > 0)

@@ -4,6 +4,8 @@ and dfsph_history, shared by the dfsph_* mirrors.
 Mirror of shaders/sph/dfsph.glsl: same names, same values (the step, the solves and their
 equations are described there).
 """
+from numba import njit
+
 SOLVE_DIVERGENCE = 1  # P.level of the divergence-free solve's stages
 SOLVE_DENSITY = 2  # P.level of the constant-density solve's stages
 SOLVE_WARM_START = 3  # P.level of dfsph_velocity's warm start of the constant-density solve
@@ -17,7 +19,14 @@ CONTROL_FAILURES = 6  # solves that spent their budget unconverged, since the st
 CONTROL_FAILED_STEP = 7  # the first of them: its step (1 = the first step)
 CONTROL_FAILED_SOLVE = 8  # and its solve
 CONTROL_MAX_ITERATIONS = 9  # fluid.max_iterations (host)
-CONTROL_SIZE = 16
+CONTROL_DISPATCH = 16  # [dispatch_base(solve)]: the solve's indirect dispatch arguments, (x, y, z) work
+DISPATCH_CHECK = 4  # groups of its dfsph_velocity and dfsph_residual, and at + DISPATCH_CHECK of its dfsph_check
+CONTROL_SIZE = 32
+
+
+@njit
+def dispatch_base(solve):
+    return CONTROL_DISPATCH + 8 * (solve - 1)
 
 # dfsph_state (float32)
 STATE_TOLERANCE = 0  # [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error

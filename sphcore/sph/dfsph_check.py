@@ -1,7 +1,8 @@
 """DFSPH's convergence test of solve P.level (dfsph.py), one work group: the mean residual in a fixed
-order is the solve's error; under the tolerance after the minimum iterations, or with the budget spent,
-the solve's done flag is set; an unconverged stop is counted and the first recorded; the
-constant-density solve's stop writes the step's row of dfsph_history.
+order (of dfsph_residual's work groups' sums) is the solve's error; under the tolerance after the
+minimum iterations, or with the budget spent, the solve's done flag is set and its indirect dispatches'
+work groups zeroed; an unconverged stop is counted and the first recorded; the constant-density solve's
+stop writes the step's row of dfsph_history.
 
 Mirror of shaders/sph/dfsph_check.comp: same names, same statement order, same step labels. The
 shader's barrier splits it into two phases, so this mirror is launched by its own `launch`, not by
@@ -14,9 +15,10 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES,
-                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, HISTORY_COLUMNS,
-                               HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE, SOLVE_DENSITY,
-                               SOLVE_DIVERGENCE, STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE)
+                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, DISPATCH_CHECK,
+                               HISTORY_COLUMNS, HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE,
+                               SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE,
+                               dispatch_base)
 
 f32 = np.float32
 
@@ -25,17 +27,14 @@ f32 = np.float32
 def dfsph_check(spec, real=np.float32):
 
     @njit
-    def dfsph_check_stopped(params, dfsph_control):
-        # [1] the solve; nothing once it has stopped (the flag is the same for every invocation)
-        return dfsph_control[CONTROL_DONE + int(params[0].level)] != 0
-
-    @njit
-    def dfsph_check_share(lid, local_size, params, particle_residual, s_sum):
+    def dfsph_check_share(lid, local_size, params, dfsph_partial, s_sum):
         P = params[0]
-        # [2] each invocation sums the residuals lid, lid + L, lid + 2 L, ... in index order
+        # [1] the solve (no work group once it has stopped: its dispatch is indirect); dfsph_residual's groups
+        groups = (int(P.n) + local_size - 1) // local_size
+        # [2] each invocation sums the groups' sums lid, lid + L, lid + 2 L, ... in index order
         total = real(0.0)
-        for k in range(lid, int(P.n), local_size):
-            total += particle_residual[k]
+        for k in range(lid, groups, local_size):
+            total += dfsph_partial[k]
         s_sum[lid] = total
 
     @njit
@@ -57,6 +56,8 @@ def dfsph_check(spec, real=np.float32):
         if not converged and iterations < dfsph_control[CONTROL_MAX_ITERATIONS]:
             return
         dfsph_control[CONTROL_DONE + solve] = 1
+        dfsph_control[dispatch_base(solve)] = 0
+        dfsph_control[dispatch_base(solve) + DISPATCH_CHECK] = 0
         dfsph_state[STATE_ERROR + solve] = error
         # [5] a solve that spent its budget unconverged: counted, the first one recorded
         if not converged:
@@ -83,14 +84,11 @@ def dfsph_check(spec, real=np.float32):
         dfsph_control[CONTROL_STEP] = step
 
     @njit(error_model="numpy")
-    def launch(n_groups, local_size, params, time_state, particle_residual, dfsph_control, dfsph_state,
-               dfsph_history):
+    def launch(n_groups, local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, dfsph_partial):
         for group in range(n_groups):
-            if dfsph_check_stopped(params, dfsph_control):
-                return
             s_sum = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
-                dfsph_check_share(lid, local_size, params, particle_residual, s_sum)
+                dfsph_check_share(lid, local_size, params, dfsph_partial, s_sum)
             # (barrier)
             dfsph_check_decide(local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum)
 

@@ -1,6 +1,6 @@
 """DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11), one invocation per particle, after
-compute_density; invocation 0 also starts the step's two solves (dfsph.py), and every particle's
-pressure starts from 0.
+compute_density; invocation 0 also starts the step's two solves (dfsph.py: their flags, counts and
+indirect dispatches), and every particle's pressure starts from 0.
 
 Mirror of shaders/sph/dfsph_factor.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -8,13 +8,13 @@ A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import CONTROL_DONE, CONTROL_ITERATIONS, SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, DISPATCH_CHECK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+                               WARM_START, dispatch_base)
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
-from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
@@ -26,7 +26,7 @@ def dfsph_factor(spec, real=np.float32):
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
 
     @njit
-    def dfsph_factor_main(i, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
+    def dfsph_factor_main(i, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
                           particle_alpha, dfsph_control, particle_kappa):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
@@ -37,6 +37,14 @@ def dfsph_factor(spec, real=np.float32):
             dfsph_control[CONTROL_DONE + SOLVE_DENSITY] = 0
             dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0
             dfsph_control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0
+            for solve in range(SOLVE_DIVERGENCE, SOLVE_DENSITY + 1):
+                base = dispatch_base(solve)
+                dfsph_control[base] = (P.n + local_size - 1) // local_size
+                dfsph_control[base + 1] = 1
+                dfsph_control[base + 2] = 1
+                dfsph_control[base + DISPATCH_CHECK] = 1
+                dfsph_control[base + DISPATCH_CHECK + 1] = 1
+                dfsph_control[base + DISPATCH_CHECK + 2] = 1
         # [2] own position; wall and obstacle images as in compute_density
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
@@ -112,4 +120,12 @@ def dfsph_factor(spec, real=np.float32):
         particle_p[i] = real(0.0)
         particle_kappa[i] = real(WARM_START) * particle_kappa[i]
 
-    return launcher(dfsph_factor_main)
+    @njit(parallel=True, error_model="numpy")
+    def launch(n_groups, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
+               particle_alpha, dfsph_control, particle_kappa):
+        for group in prange(n_groups):
+            for lid in range(local_size):
+                dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, cell_pyramid,
+                                  cell_start, obstacle_box, particle_alpha, dfsph_control, particle_kappa)
+
+    return launch

@@ -1,11 +1,13 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
 rate d_i = sum_j V (v_i - v_j) . grad W_ij; divergence-free solve r_i = max(d_i, 0), constant-density
-solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a. Returns at once once the solve
-has stopped.
+solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a; each work group's residuals summed
+in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
 
 Mirror of shaders/sph/dfsph_residual.comp: same names, same statement order, same step labels.
-A GLSL vec3 local `v` is `v_x, v_y, v_z` here. Its `launch` returns before the work groups where
-the solve has stopped: every invocation would return at once (the flag is the same for all).
+A GLSL vec3 local `v` is `v_x, v_y, v_z` here. The shader's barrier splits it into two phases, so
+`launch` runs, per work group, one local loop over the invocations per phase, with the group's shared
+array as scratch (STYLE.md); the first phase is `dfsph_residual_main`, which returns the invocation's
+residual (the value it leaves in shared memory).
 """
 from functools import lru_cache
 
@@ -13,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import CONTROL_DONE, SOLVE_DENSITY
+from sphcore.sph.dfsph import SOLVE_DENSITY
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
 
@@ -28,14 +30,14 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid, cell_start,
-                            obstacle_box, time_state, particle_residual, dfsph_control):
+                            obstacle_box, time_state, particle_residual):
         P = params[0]
-        # [1] one invocation per particle; nothing once the solve has stopped
-        if i >= P.n:
-            return
+        # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
+        #     invocation of the group reaches the barrier, with a residual of 0 past the last particle
         solve = int(P.level)
-        if dfsph_control[CONTROL_DONE + solve] != 0:
-            return
+        residual = real(0.0)
+        if i >= P.n:
+            return residual
         # [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
         dt = real(time_state[0, 0])
         kick = dt if solve == SOLVE_DENSITY else real(0.0)
@@ -112,16 +114,26 @@ def dfsph_residual(spec, real=np.float32):
             residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0))
         # [10] store
         particle_residual[i] = residual
+        return residual
+
+    @njit
+    def dfsph_residual_partial(group, local_size, dfsph_partial, s_residual):
+        # [11] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+        total = real(0.0)
+        for k in range(local_size):
+            total += s_residual[k]
+        dfsph_partial[group] = total
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid,
-               cell_start, obstacle_box, time_state, particle_residual, dfsph_control):
-        if dfsph_control[CONTROL_DONE + int(params[0].level)] != 0:
-            return  # (every invocation would return at [1])
+               cell_start, obstacle_box, time_state, particle_residual, dfsph_partial):
         for group in prange(n_groups):
+            s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
-                dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v, particle_a,
-                                    particle_rho, cell_pyramid, cell_start, obstacle_box, time_state,
-                                    particle_residual, dfsph_control)
+                s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
+                                                      particle_a, particle_rho, cell_pyramid, cell_start,
+                                                      obstacle_box, time_state, particle_residual)
+            # (barrier)
+            dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
 
     return launch

@@ -1,22 +1,22 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
 -sum_j V (s_i + s_j) grad W_ij, s_j = alpha_j r_j (divergence-free) or alpha_j r_j / dt^2 (constant
 density), added to the velocity (divergence-free) or to the acceleration, with the pressure
-accumulated (constant density). Returns at once once the solve has stopped; invocation 0 counts
-the update.
+accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
+(dfsph_check); invocation 0 counts the update.
 
 Mirror of shaders/sph/dfsph_velocity.comp: same names, same statement order, same step labels.
-A GLSL vec3 local `v` is `v_x, v_y, v_z` here. Its `launch` returns before the work groups where
-the solve has stopped: every invocation would return at once (the flag is the same for all).
+A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
 """
 from functools import lru_cache
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import CONTROL_DONE, CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.dfsph import CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
+from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
@@ -32,13 +32,12 @@ def dfsph_velocity(spec, real=np.float32):
                             cell_start, obstacle_box, time_state, particle_alpha, particle_residual, dfsph_control,
                             particle_kappa):
         P = params[0]
-        # [1] one invocation per particle; nothing once the solve has stopped; invocation 0 counts the update
+        # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
+        #     invocation 0 counts the update
         if i >= P.n:
             return
         solve = int(P.level)
         warm = solve == SOLVE_WARM_START  # the warm start: always, and not counted
-        if not warm and dfsph_control[CONTROL_DONE + solve] != 0:
-            return
         if not warm and i == 0:
             dfsph_control[CONTROL_ITERATIONS + solve] += 1
         # [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
@@ -133,17 +132,4 @@ def dfsph_velocity(spec, real=np.float32):
             if not warm:
                 particle_kappa[i] = p * real(P.rest_density) / (rhoi * rhoi)
 
-    @njit(parallel=True, error_model="numpy")
-    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
-               cell_pyramid, cell_start, obstacle_box, time_state, particle_alpha, particle_residual, dfsph_control,
-               particle_kappa):
-        solve = int(params[0].level)
-        if solve != SOLVE_WARM_START and dfsph_control[CONTROL_DONE + solve] != 0:
-            return  # (every invocation would return at [1])
-        for group in prange(n_groups):
-            for lid in range(local_size):
-                dfsph_velocity_main(group * local_size + lid, params, particle_x, particle_v, particle_a,
-                                    particle_rho, particle_p, cell_pyramid, cell_start, obstacle_box, time_state,
-                                    particle_alpha, particle_residual, dfsph_control, particle_kappa)
-
-    return launch
+    return launcher(dfsph_velocity_main)

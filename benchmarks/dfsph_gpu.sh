@@ -1,0 +1,29 @@
+#!/bin/bash
+# Issue 14's GPU figures: the 3D Martin & Moyce dam break (a channel RES particles deep) with WCSPH
+# (config "graphics") and DFSPH (config "dfsph", the same model with physics.pressure_solver = "dfsph")
+# on one NVIDIA GPU through Vulkan, one after the other (no run shares the GPU), at each resolution of
+# $RES (default "40 80": 128,000 and 1,024,000 particles), into $OUT/dfsph/ (default
+# benchmarks/results/dfsph/h200/): mm3d_<RES>_<solver>.json (wall_per_simulated_s, mean_dt, the RMS of
+# Z) and .log. Each run stops after $LIMIT seconds (default 240).
+# Run from the repository root on the device machine, with the ignored folders .gl (Vulkan loader and
+# glslang debs) and .whl (the vulkan, cffi and pycparser wheels for its Python 3.12) carried there.
+set -u -o pipefail
+OUT=${OUT:-benchmarks/results/dfsph/h200}
+for f in .gl/*.deb; do dpkg -x "$f" /; done
+ldconfig
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
+export PYTHONPATH=/tmp/site:. VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json \
+       PYTHONUNBUFFERED=1 SPHCORE_CACHE_DIR=/tmp/spvcache
+nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
+mkdir -p "$OUT"
+for r in ${RES:-40 80}; do
+    for solver in state_equation dfsph; do
+        config=$([ "$solver" = dfsph ] && echo dfsph || echo graphics)
+        name=mm3d_${r}_$solver
+        timeout "${LIMIT:-240}" python3 -m sphcore validate dam-break --backend vulkan --dimension 3 \
+            --resolution "$r" --depth "$r" --t-end 0.5 --config "$config" --out "/tmp/$name" > "$OUT/$name.log" 2>&1
+        echo "$name rc=$? $(tr '\r' '\n' < "$OUT/$name.log" | grep -v '%|' | tail -1)"
+        cp "/tmp/$name/dam_break_3d.json" "$OUT/$name.json" 2>/dev/null
+    done
+done
+exit 0
