@@ -15,8 +15,13 @@ Shaders take their compile-time choices as specialization constants; a mirror mo
 exposes a factory `stage(spec, real)` that builds its body with those values as closure
 constants (numba compiles them in, so a disabled term costs nothing), cached per `spec` and
 `real`, the float type of the shader build (np.float32, or np.float64: shaders/sph/real.glsl).
+
+A launch keeps its compiled code on disk across runs, one entry per set of closure constants
+(sphcore/numba_cache.py); a stage that writes its own launch returns `cached(launch)`.
 """
 from numba import njit, prange
+
+from sphcore.numba_cache import cached
 
 
 def launcher(main, parallel=True):
@@ -35,7 +40,7 @@ def launcher(main, parallel=True):
                     gid = group * local_size + lid
                     main(gid, *args)
 
-    return launch
+    return cached(launch)
 
 
 def group_count(n, local_size):

@@ -13,6 +13,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.numba_cache import cached
+
 f32 = np.float32
 
 
@@ -86,4 +88,4 @@ def choose_dt(spec, real=np.float32):
             # invocation 0 only
             choose_dt_last(params, time_state, s_v2, s_a2)
 
-    return launch
+    return cached(launch)

@@ -10,6 +10,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit, prange
 
+from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, DISPATCH_CHECK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
                                WARM_START, dispatch_base)
@@ -128,4 +129,4 @@ def dfsph_factor(spec, real=np.float32):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, cell_pyramid,
                                   cell_start, obstacle_box, particle_alpha, dfsph_control, particle_kappa)
 
-    return launch
+    return cached(launch)

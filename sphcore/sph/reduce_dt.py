@@ -12,6 +12,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit, prange
 
+from sphcore.numba_cache import cached
+
 
 @lru_cache(maxsize=None)
 def reduce_dt(spec, real=np.float32):
@@ -49,4 +51,4 @@ def reduce_dt(spec, real=np.float32):
             dt_partial[group, 0] = s_v2[0]
             dt_partial[group, 1] = s_a2[0]
 
-    return launch
+    return cached(launch)

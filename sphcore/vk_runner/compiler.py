@@ -12,6 +12,8 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+from sphcore import paths
+
 
 class ShaderCompileError(RuntimeError):
     """No compiler, or the compiler rejected a shader (its message names file and line)."""
@@ -40,7 +42,7 @@ def _command(kind, path, source, output, target_env, defines=()):
 
 
 def cache_dir():
-    return Path(os.environ.get("SPHCORE_CACHE_DIR", Path.home() / ".cache" / "sphcore")) / "spirv"
+    return paths.cache_dir("spirv")
 
 
 def compile_glsl(source, target_env="vulkan1.1", defines=()):

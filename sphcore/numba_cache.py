@@ -1,0 +1,131 @@
+"""The numba mirrors' machine code kept on disk, so that a second run of a scene does not compile.
+
+numba's own `cache=True` cannot keep the mirrors: its index key hashes a closure's values by
+pickling them (numba/core/caching.py, `Cache._index_key`), and a jitted function pickles with a
+uuid drawn afresh in every process (numba/core/dispatcher.py, `Dispatcher._reduce_states`). A
+stage's launch closes over its body `main`, which closes over its helpers (`kernel_w`, `cell_of`),
+so its key differs in every run: it never finds its entry and adds one more each time.
+
+`cached(launch)` gives a launch a cache whose key is made the same in every run (`fingerprint`):
+the launch's bytecode and its closure's values, each jitted function among them fingerprinted in
+turn by its own bytecode and closure. The specialization constants and `real` are closure values,
+so two specs (DIM 2 or 3, float32 or float64, any switch a stage reads) get two entries, each in a
+file of its own, and the same spec finds its entry in every run. The key also holds the call's
+types (numba's signature), the CPU (numba's magic tuple), the launch's options and
+NUMBA_BOUNDSCHECK. Only launches are cached: their helpers are compiled into them and come back
+from disk with them.
+
+An entry is valid only under the stamp it was written with: a hash of every .py file of the
+package (a module-level helper or constant is read from the source, not from a closure). numba
+adds its version. Editing sphcore or upgrading numba therefore compiles again; stale files stay
+until the folder is deleted. numba does not lock an index: processes that compile the same
+launch at once write the same entry, which is harmless; two processes compiling one launch for
+different argument types at the same moment could cross their entries (every launch here is
+called with one set of types per specialization).
+
+Folder: $NUMBA_CACHE_DIR/sphcore where NUMBA_CACHE_DIR is set, else $SPHCORE_CACHE_DIR/numba,
+else ~/.cache/sphcore/numba (never inside the package, which may be installed read-only). Where
+the folder cannot be written, launches compile on every run, as without the cache.
+"""
+import hashlib
+import inspect
+import pickle
+from functools import lru_cache
+
+from numba.core import config
+from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
+
+from sphcore.paths import PACKAGE_DIR, cache_dir
+
+
+def cached(launch):
+    """`launch` (a numba dispatcher) with its compiled code kept on disk across runs."""
+    try:
+        launch._cache = MirrorCache(launch)
+    except RuntimeError:  # no locator: the folder cannot be written
+        pass
+    return launch
+
+
+def numba_cache_dir():
+    """Where the compiled mirrors are kept (see the module's docstring)."""
+    return cache_dir("numba") if not config.CACHE_DIR else cache_dir("sphcore", config.CACHE_DIR)
+
+
+@lru_cache(maxsize=None)
+def source_stamp():
+    """A hash of every .py file of the package."""
+    digest = hashlib.sha256()
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        digest.update(str(path.relative_to(PACKAGE_DIR)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def fingerprint(func):
+    """A hash of what `func`'s compiled code depends on beyond the package's source: its bytecode
+    and its closure's values, a jitted function's (or a Python function's) taken the same way."""
+    digest = hashlib.sha256()
+    _add_function(digest, func)
+    return digest.hexdigest()
+
+
+def _add_function(digest, func):
+    digest.update(func.__qualname__.encode() + b"\0")
+    _add_code(digest, func.__code__)
+    for cell in func.__closure__ or ():
+        value = cell.cell_contents
+        value = getattr(value, "py_func", value)  # a jitted function: its Python function
+        if inspect.isfunction(value):
+            _add_function(digest, value)
+        else:
+            digest.update(pickle.dumps(value, protocol=4))
+
+
+def _add_code(digest, code):
+    digest.update(pickle.dumps((code.co_code, code.co_names, code.co_varnames, code.co_freevars), protocol=4))
+    for const in code.co_consts:
+        if inspect.iscode(const):
+            _add_code(digest, const)
+        else:
+            digest.update(pickle.dumps(const, protocol=4))
+
+
+class MirrorLocator(_CacheLocator):
+    """numba's cache locator for a launch: the folder, the stamp, and the fingerprint in the file names."""
+
+    def __init__(self, py_func):
+        self._path = str(numba_cache_dir())
+        self.fingerprint = fingerprint(py_func)
+
+    def get_cache_path(self):
+        return self._path
+
+    def get_source_stamp(self):
+        return source_stamp()
+
+    def get_disambiguator(self):
+        return self.fingerprint[:24]
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        self = cls(py_func)
+        try:
+            self.ensure_cache_path()
+        except OSError:
+            return None
+        return self
+
+
+class MirrorCacheImpl(CompileResultCacheImpl):
+    _locator_classes = [MirrorLocator]
+
+
+class MirrorCache(FunctionCache):
+    _impl_class = MirrorCacheImpl
+
+    def __init__(self, dispatcher):
+        super().__init__(dispatcher.py_func)
+        self._options = repr(sorted(dispatcher.targetoptions.items()))
+
+    def _index_key(self, sig, codegen):
+        return (sig, codegen.magic_tuple(), self._impl.locator.fingerprint, self._options, config.BOUNDSCHECK)
