@@ -316,7 +316,9 @@ class NumbaBackend:
             return self._profiled_step(count)
         for _ in range(count):
             for launch, groups, params, buffers in self._launch:
-                launch(self._launch_groups(groups), self.local_size, params, *buffers)
+                n_groups = self._launch_groups(groups)
+                if n_groups:  # (a launch of no work groups does nothing: skipped, as numba's call costs)
+                    launch(n_groups, self.local_size, params, *buffers)
 
     def _profiled_step(self, count):
         for _ in range(count):

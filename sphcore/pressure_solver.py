@@ -24,8 +24,13 @@ class ConvergenceWarning(UserWarning):
 
 
 def init_state(state, scene):
-    """Write the scene's solver settings into `state` (of backends.empty_state): the iteration budget
-    into dfsph_control, the two tolerances into dfsph_state."""
+    """Write the scene's solver settings into `state` (of backends.empty_state, its positions set): the
+    iteration budget into dfsph_control, the two tolerances into dfsph_state; and the stiffness sum
+    kappa = p / rho_0 of the hydrostatic pressure (Scene.hydrostatic_pressure) into particle_kappa, so
+    that the first step's warm start holds part of the column up, as every later step's does (from
+    zero, a Jacobi solve needs about as many iterations as the column is particles tall)."""
+    x = state["particle_x"][:, :scene.dim]
+    state["particle_kappa"][:] = scene.hydrostatic_pressure(x) / scene["fluid.rest_density"]
     state["dfsph_control"][CONTROL_MAX_ITERATIONS] = scene["fluid.max_iterations"]
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DIVERGENCE] = scene["fluid.max_divergence_error"]
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DENSITY] = scene["fluid.max_density_error"]
@@ -40,7 +45,7 @@ class SolverLog:
 
     def collect(self, backend, first, last):
         """Read the rows of steps first + 1 .. last (at most HISTORY_ROWS of them) and report what did
-        not converge."""
+        not converge (the control block is read only where a row says so: one readback per call)."""
         if last - first > HISTORY_ROWS:
             raise ValueError(f"steps {first + 1}..{last}: the history ring holds {HISTORY_ROWS} steps")
         if last <= first:
@@ -51,6 +56,8 @@ class SolverLog:
             if int(row[0]) != step:  # the step count is the device's and the host's: they cannot differ
                 raise RuntimeError(f"DFSPH history: row for step {step} holds step {int(row[0])}")
             self.rows[step] = row
+        if all(self.rows[step][7] == 1 for step in range(first + 1, last + 1)):
+            return
         control = backend.read_buffer("dfsph_control")
         failures = int(control[CONTROL_FAILURES])
         if failures > self.reported:

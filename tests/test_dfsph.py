@@ -198,6 +198,10 @@ def test_state_holds_the_settings():
     scene = scene_of(**{"fluid.max_iterations": 7, "fluid.max_density_error": 2e-3})
     params = scene.params(4)
     state = empty_state(params)
+    state["particle_x"][:, :2] = [[0.005, 0.095], [0.005, 0.005], [0.2, 0.05], [0.095, 0.045]]
     init_state(state, scene)
     assert state["dfsph_control"][9] == 7
     assert state["dfsph_state"][SOLVE_DENSITY] == np.float32(2e-3)
+    # the first step's warm start: kappa = p / rho_0 = |g| times the depth below the column's top (0.1 m);
+    # none outside the column
+    assert state["particle_kappa"] == pytest.approx([9.81 * 0.005, 9.81 * 0.095, 0.0, 9.81 * 0.055], rel=1e-5)

@@ -93,3 +93,15 @@ def test_validate_dam_break_cli(tmp_path):
     assert 0.05 <= float(rows[-1]["t"]) < 0.05 + dt
     assert (out / "dam_break_2d.png").stat().st_size > 10_000
     assert (out / "dam_break_2d.json").is_file()
+
+
+def test_neighbour_counts_match_all_pairs():
+    """The front's neighbour test looks only in each batch's box grown by h: the same counts as all pairs."""
+    from sphcore.validate.dam_break import neighbour_counts
+    rng = np.random.default_rng(3)
+    x = rng.random((3000, 3)) * [1.0, 0.5, 0.2]
+    h, candidates = 0.05, np.argsort(x[:, 0])[::-1][:300]
+    d2 = ((x[candidates][:, None, :] - x[None, :, :]) ** 2).sum(axis=2)
+    expected = (d2 < h * h * (1 - 1e-5)).sum(axis=1) - 1
+    assert expected.max() > 5
+    assert np.array_equal(neighbour_counts(x, candidates, h), expected)

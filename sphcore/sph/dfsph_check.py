@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.numba_cache import cached
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES,
                                CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, DISPATCH_CHECK,
                                HISTORY_COLUMNS, HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE,
@@ -92,4 +93,4 @@ def dfsph_check(spec, real=np.float32):
             # (barrier)
             dfsph_check_decide(local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum)
 
-    return launch
+    return cached(launch)

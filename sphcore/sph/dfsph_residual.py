@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit, prange
 
+from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import SOLVE_DENSITY
 from sphcore.sph.kernels import kernels
@@ -136,4 +137,4 @@ def dfsph_residual(spec, real=np.float32):
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
 
-    return launch
+    return cached(launch)

@@ -1,0 +1,66 @@
+"""DFSPH against WCSPH by the cost of their steps alone (issue 14), in one process on one device.
+
+The 3D Martin & Moyce dam break of `sphcore validate dam-break --dimension 3` (a channel as deep as the
+column is wide: --resolution particles across a and across the channel), the same model with either
+pressure solver (config "graphics" or "dfsph", with --kernel), stepped for --steps steps after --warm
+steps, --per-submit steps per submit, the state left on the device: ms per step, and with each
+solver's mean dt from a full run (--dt-from: the JSONs of benchmarks/dfsph_gpu.sh, keyed by
+mm3d_<resolution>_<solver>.json) the wall time per simulated second. Printed and written as JSON.
+
+    python3 benchmarks/dfsph_steps.py --backend vulkan --resolution 40 80 --dt-from benchmarks/results/dfsph/h200 \\
+        --out benchmarks/results/dfsph/h200/steps.json
+"""
+import argparse
+import json
+import time
+from pathlib import Path
+
+from sphcore.simulation import Simulation
+from sphcore.validate.dam_break import dam_break_scene
+
+SOLVERS = {"state_equation": "graphics", "dfsph": "dfsph"}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--backend", default="vulkan")
+    ap.add_argument("--resolution", type=int, nargs="+", default=[40])
+    ap.add_argument("--kernel", default="wendland_c2")
+    ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--warm", type=int, default=10)
+    ap.add_argument("--per-submit", type=int, default=10)
+    ap.add_argument("--dt-from", help="folder of benchmarks/dfsph_gpu.sh's JSONs (each solver's mean dt)")
+    ap.add_argument("--out")
+    args = ap.parse_args()
+    rows = []
+    for r in args.resolution:
+        for solver, config in SOLVERS.items():
+            scene = dam_break_scene({"dimension": 3, "resolution": r, "depth": r, "config": config,
+                                     "kernel": args.kernel, "backend": args.backend})
+            with Simulation(scene, args.backend) as sim:
+                sim.advance(args.warm)
+                sim.read()
+                start = time.perf_counter()
+                for _ in range(args.steps // args.per_submit):
+                    sim.advance(args.per_submit)
+                sim.backend.read_buffer("time_state")  # (waits for the device)
+                seconds = (time.perf_counter() - start) / (args.steps // args.per_submit * args.per_submit)
+                row = {"resolution": r, "particles": sim.n, "solver": solver, "ms_per_step": 1e3 * seconds,
+                       "device": getattr(getattr(sim.backend, "ctx", None), "device_name", "cpu (numba)")}
+            if args.dt_from:
+                full = json.loads((Path(args.dt_from) / f"mm3d_{r}_{solver}.json").read_text())
+                row.update(mean_dt=full["mean_dt"], wall_per_simulated_s=seconds / full["mean_dt"],
+                           rms_Z_table2=full["rms_Z_table2"])
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    for r in args.resolution:
+        mine = {row["solver"]: row for row in rows if row["resolution"] == r}
+        if args.dt_from:
+            print(f"{r} across a: DFSPH / WCSPH wall time per simulated second = "
+                  f"{mine['dfsph']['wall_per_simulated_s'] / mine['state_equation']['wall_per_simulated_s']:.2f}")
+    if args.out:
+        Path(args.out).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
