@@ -323,9 +323,11 @@ class NumbaBackend:
     def _profiled_step(self, count):
         for _ in range(count):
             for stage, (launch, groups, params, buffers) in zip(self.stages, self._launch):
-                start = time.perf_counter()
-                launch(self._launch_groups(groups), self.local_size, params, *buffers)
-                self.profile.add(stage.name, time.perf_counter() - start)
+                n_groups = self._launch_groups(groups)
+                if n_groups:  # (as step: a launch of no work groups is skipped)
+                    start = time.perf_counter()
+                    launch(n_groups, self.local_size, params, *buffers)
+                    self.profile.add(stage.name, time.perf_counter() - start)
         self.profile.steps += count
 
     def read(self):

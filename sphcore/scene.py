@@ -346,7 +346,8 @@ class Scene:
 
     def _folded_dt(self):
         """P.dt: the time step, or where it is adaptive the largest one, dt_fraction times the viscous
-        bound (1 s without viscosity): the state-dependent bounds are the device's (choose_dt.comp)."""
+        bound (1 s without viscosity) and for DFSPH times the CFL step at the free-fall speed: the
+        state-dependent bounds are the device's (choose_dt.comp)."""
         if not self.adaptive_dt or self.dfsph and self["time.dt"] not in ("auto", "adaptive"):
             return self["time.dt"] if self.dfsph else self.dt
         mu = self.shear_viscosity
