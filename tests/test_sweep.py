@@ -152,3 +152,29 @@ def test_recommendations_per_configuration():
     assert "Configuration engineering: 2 of 2 points ran; most accurate engineering (RMS 0.040, 12.00 s)" in text
     assert "Configuration no_slip: 0 of 1 points ran" in text
     assert sweep.point_key({k: v for k, v in at().items() if k != "config"}) == sweep.point_key(at())  # older tables
+
+
+def test_pareto_plot_names_each_configuration(tmp_path, monkeypatch):
+    """The picture shows which configuration each point is: a colour per configuration with its
+    legend entry, a marker per other varied axis."""
+    rows = synthetic((13.0, 0.08, {}), (3.0, 0.12, {"resolution": 16}), (12.0, 0.04, {"config": "engineering"}),
+                     (4.0, 0.09, {"resolution": 16, "config": "engineering"}), (20.0, 0.06, {"config": "dfsph"}),
+                     (0.0, math.nan, {"config": "no_slip"}, "failed"))
+    seen = {}
+
+    def capture(fig, path):
+        legends = {lg.get_title().get_text(): lg for lg in fig.legends}
+        by_config = legends["configuration (colour)"]
+        seen["configs"] = [t.get_text() for t in by_config.get_texts()]
+        seen["colours"] = [tuple(h.get_color()) for h in by_config.legend_handles]
+        seen["markers"] = [t.get_text() for t in legends["varied beside it (marker)"].get_texts()]
+        drawn = [(tuple(c.get_facecolor()[0][:3]), c.get_offsets()[0][0]) for c in fig.axes[0].collections]
+        seen["points"] = {name: [cost for c, cost in drawn if c == tuple(col[:3])]
+                          for name, col in zip(seen["configs"], seen["colours"])}
+
+    monkeypatch.setattr(sweep, "atomic_savefig", capture)
+    sweep.plot_pareto(rows, tmp_path / "pareto.png")
+    assert seen["configs"] == ["graphics", "engineering", "dfsph"]  # the failed no_slip point is not drawn
+    assert len(set(seen["colours"])) == 3
+    assert seen["markers"] == ["default", "resolution", "Pareto front", "RMS = 0.15"]
+    assert sorted(seen["points"]["engineering"]) == [4.0, 12.0] and seen["points"]["dfsph"] == [20.0]

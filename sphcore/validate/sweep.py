@@ -376,24 +376,34 @@ def limits(effects):
     return lines
 
 
+MARKERS = "osD^vP<>X*hpd8H"
+
+
+def others(row):
+    """What `row` varies beside its configuration ("default" if nothing): the marker's group."""
+    return "+".join(k for k in varied(row).split("+") if k != "config") or "default"
+
+
 def plot_pareto(rows, path, threshold=THRESHOLD):
-    """Error against cost (log), coloured by what was varied, marker by backend; the front drawn
-    and its points labelled."""
+    """Error against cost (log): colour by configuration, marker by what else was varied (the
+    resolution ladder, the time step, ..., the backend among them), each with its legend; the
+    front drawn and its points labelled."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     ok = ok_rows(rows)
-    fig, ax = plt.subplots(figsize=(10, 6.2), dpi=110)
-    groups = sorted({r["varied"] for r in ok})
-    colours = plt.get_cmap("tab20")(range(len(groups))) if groups else []
-    markers = {"numba": "o", "vulkan": "s"}
-    for group, colour in zip(groups, colours):
-        for backend, marker in markers.items():
-            sel = [r for r in ok if r["varied"] == group and r["backend"] == backend]
-            if sel:
-                ax.scatter([r[COST] for r in sel], [r[ERROR] for r in sel], color=colour, marker=marker, s=36,
-                           edgecolor="k", linewidth=0.4, label=f"{group} [{backend}]")
+    fig, ax = plt.subplots(figsize=(12, 6.6), dpi=110)
+    configs = list(dict.fromkeys([c for c in CONFIGS if any(r["config"] == c for r in ok)]
+                                 + [r["config"] for r in ok]))  # configs.py's order, then any other name
+    # tab20's dark shades first, then its light ones: neighbours in the legend differ in hue
+    colours = dict(zip(configs, plt.get_cmap("tab20")([2 * i % 20 + 2 * i // 20 for i in range(len(configs))])))
+    groups = sorted({others(r) for r in ok}, key=lambda g: (g != "default", g))
+    markers = {g: MARKERS[i % len(MARKERS)] for i, g in enumerate(groups)}
+    for r in ok:
+        ax.scatter(r[COST], r[ERROR], color=colours[r["config"]], marker=markers[others(r)], s=40,
+                   edgecolor="k", linewidth=0.4)
     front = pareto_front(rows)
     if front:
         ax.step([r[COST] for r in front], [r[ERROR] for r in front], "k-", where="post", lw=1.2,
@@ -410,8 +420,14 @@ def plot_pareto(rows, path, threshold=THRESHOLD):
            title=f"2D dam break: error against cost, {len(ok)} points"
                  + (f" ({failed} failed, not shown)" if failed else ""))
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    fig.tight_layout()
+    dot = lambda **kw: Line2D([], [], ls="", markersize=6, markeredgecolor="k", markeredgewidth=0.4, **kw)  # noqa: E731
+    fig.legend([dot(marker="o", color=colours[c]) for c in configs], configs, title="configuration (colour)",
+               fontsize=7, title_fontsize=7, loc="upper left", bbox_to_anchor=(0.6, 0.93))
+    handles, names = ax.get_legend_handles_labels()  # the front and the threshold
+    fig.legend([dot(marker=markers[g], color="0.8") for g in groups] + handles, groups + names,
+               title="varied beside it (marker)", fontsize=7, title_fontsize=7, loc="upper left",
+               bbox_to_anchor=(0.77, 0.93))
+    fig.subplots_adjust(left=0.07, right=0.58, bottom=0.09, top=0.93)
     atomic_savefig(fig, path)
     plt.close(fig)
     return path
