@@ -5,11 +5,12 @@ Each run is a fresh Python process with SPHCORE_CACHE_DIR set to a folder of thi
 cold run filled (sphcore/numba_cache.py). Two kinds of run, each cold once and then warm
 --repeat times:
 - api: `sphcore.Simulation(Scene.load(scene))`, one step, then the rest; the seconds from the
-  process's launch to the end of the first step ("first_step") and of the last ("total");
+  process's launch to the end of the first step ("first_step") and of the last ("total"), and the
+  steady cost of a step after the first ("ms_per_later_step", with the final read);
 - cli: `python -m sphcore run SCENE --steps N` as a user types it, snapshots and checkpoints
   written; its wall time ("total").
 
-    python benchmarks/startup.py --scene tank_2d --steps 100 --out benchmarks/results/startup_cpu.json
+    python benchmarks/startup.py --scene tank_2d --steps 1000 --out benchmarks/results/startup_cpu.json
 """
 import argparse
 import json
@@ -52,7 +53,8 @@ def run(kind, scene, steps, cache_dir, out_dir):
     if kind == "cli":
         return {"total": end - start}
     ready, first, last = map(float, proc.stdout.split())
-    return {"ready": ready - start, "first_step": first - start, "total": last - start}
+    return {"ready": ready - start, "first_step": first - start, "total": last - start,
+            "ms_per_later_step": 1e3 * (last - first) / max(steps - 1, 1)}
 
 
 def main():
@@ -69,7 +71,8 @@ def main():
               "versions": {"python": platform.python_version(), "numba": numba.__version__},
               "env": {k: os.environ.get(k) for k in ("OMP_WAIT_POLICY", "NUMBA_THREADING_LAYER", "NUMBA_NUM_THREADS")},
               "note": __doc__.split("\n\n")[1], "runs": []}
-    print(f"{'kind':>4} {'cache':>5} {'ready s':>8} {'first step s':>13} {'total s':>8}", flush=True)
+    print(f"{'kind':>4} {'cache':>5} {'ready s':>8} {'first step s':>13} {'total s':>8} {'ms/later step':>13}",
+          flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         for kind in ("api", "cli"):
             cache_dir = Path(tmp) / f"cache_{kind}"
@@ -78,7 +81,8 @@ def main():
                                                                                 Path(tmp) / "run")
                 record["runs"].append(row)
                 print(f"{kind:>4} {row['cache']:>5} {row.get('ready', float('nan')):>8.2f} "
-                      f"{row.get('first_step', float('nan')):>13.2f} {row['total']:>8.2f}", flush=True)
+                      f"{row.get('first_step', float('nan')):>13.2f} {row['total']:>8.2f} "
+                      f"{row.get('ms_per_later_step', float('nan')):>13.2f}", flush=True)
         record["cache_files"] = len(list((Path(tmp) / "cache_cli" / "numba").iterdir()))
     record["host"]["loadavg_at_end"] = os.getloadavg()
     args.out.parent.mkdir(parents=True, exist_ok=True)
