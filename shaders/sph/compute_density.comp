@@ -12,6 +12,7 @@ layout(local_size_x_id = 0) in;
 #include "real.glsl"
 #include "cells.glsl"
 #include "kernels.glsl"
+#include "pairs.glsl"
 #include "density_diffusion.glsl"
 #include "equation_of_state.glsl"
 
@@ -98,15 +99,10 @@ void main() {
                     }
                 }
                 if (!CONTINUITY || r2 >= P.h2 || (j == i && image == 0u)) continue;
-                // [6] continuity: the direction r_hat from the neighbour to i, as in compute_forces (where
-                //     the two coincide: an image along its plane's inward normal, two particles along x,
-                //     antisymmetrically in (i, j)); an image's velocity is mirrored on its flipped axes
+                // [6] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
+                //     is mirrored on its flipped axes
                 real rlen = sqrt(r2);
-                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
-                if (fy) r_hat = real3(0.0, inward.y, 0.0);
-                if (fz) r_hat = real3(0.0, 0.0, inward.z);
-                if (rlen > real(0.0)) r_hat = r / rlen;
+                real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
                 real3 vj = particle_v[j].xyz;
                 real vk_x = fx ? -vj.x : vj.x;
                 real vk_y = fy ? -vj.y : vj.y;

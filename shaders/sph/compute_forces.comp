@@ -12,6 +12,7 @@ layout(local_size_x_id = 0) in;
 #include "real.glsl"
 #include "cells.glsl"
 #include "kernels.glsl"
+#include "pairs.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
@@ -48,9 +49,6 @@ void main() {
     real3 f_cohesion = real3(0.0);
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
-        bool fx = (image & 1u) != 0u;
-        bool fy = (image & 2u) != 0u;
-        bool fz = (image & 4u) != 0u;
         real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -79,11 +77,7 @@ void main() {
                 //     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                 //     along its inward normal; two particles are pushed apart along x,
                 //     antisymmetrically in (i, j), so momentum is conserved
-                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
-                if (fy) r_hat = real3(0.0, inward.y, 0.0);
-                if (fz) r_hat = real3(0.0, 0.0, inward.z);
-                if (rlen > real(0.0)) r_hat = r / rlen;
+                real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
                 // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
                 //     conserves momentum and energy with summation or continuity density (Monaghan 1992).
                 //     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates

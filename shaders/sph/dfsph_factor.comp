@@ -13,6 +13,7 @@ layout(local_size_x_id = 0) in;
 #include "real.glsl"
 #include "cells.glsl"
 #include "kernels.glsl"
+#include "pairs.glsl"
 #include "dfsph.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
@@ -58,9 +59,6 @@ void main() {
     real sum_grad2 = real(0.0);
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
-        bool fx = (image & 1u) != 0u;
-        bool fy = (image & 2u) != 0u;
-        bool fz = (image & 4u) != 0u;
         real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [4] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -82,13 +80,8 @@ void main() {
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 >= P.h2) continue;
                 real rlen = sqrt(r2);
-                // [5] direction from the neighbour to i, as in compute_forces (coincident: an image
-                //     along its plane's inward normal, two particles along x, antisymmetrically)
-                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
-                if (fy) r_hat = real3(0.0, inward.y, 0.0);
-                if (fz) r_hat = real3(0.0, 0.0, inward.z);
-                if (rlen > real(0.0)) r_hat = r / rlen;
+                // [5] direction from the neighbour to i (pairs.glsl)
+                real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
                 real g = coef * kernel_gradient(r2, rlen);
                 sum_grad -= g * r_hat;
                 sum_grad2 += g * g;

@@ -18,6 +18,7 @@ layout(local_size_x_id = 0) in;
 #include "real.glsl"
 #include "cells.glsl"
 #include "kernels.glsl"
+#include "pairs.glsl"
 #include "dfsph.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
@@ -82,12 +83,8 @@ void main() {
                     real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                     if (r2 >= P.h2) continue;
                     real rlen = sqrt(r2);
-                    // [6] direction from the neighbour to i, as in compute_forces
-                    real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                    if (fx) r_hat = real3(inward.x, 0.0, 0.0);
-                    if (fy) r_hat = real3(0.0, inward.y, 0.0);
-                    if (fz) r_hat = real3(0.0, 0.0, inward.z);
-                    if (rlen > real(0.0)) r_hat = r / rlen;
+                    // [6] direction from the neighbour to i (pairs.glsl)
+                    real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
                     // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
                     real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
                     real vk_x = fx ? -vj.x : vj.x;

@@ -15,6 +15,7 @@ layout(local_size_x_id = 0) in;
 #include "real.glsl"
 #include "cells.glsl"
 #include "kernels.glsl"
+#include "pairs.glsl"
 #include "dfsph.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
@@ -58,9 +59,6 @@ void main() {
     real3 change = real3(0.0);
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
-        bool fx = (image & 1u) != 0u;
-        bool fy = (image & 2u) != 0u;
-        bool fz = (image & 4u) != 0u;
         real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -82,12 +80,8 @@ void main() {
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (r2 >= P.h2) continue;
                 real rlen = sqrt(r2);
-                // [6] direction from the neighbour to i, as in compute_forces
-                real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
-                if (fx) r_hat = real3(inward.x, 0.0, 0.0);
-                if (fy) r_hat = real3(0.0, inward.y, 0.0);
-                if (fz) r_hat = real3(0.0, 0.0, inward.z);
-                if (rlen > real(0.0)) r_hat = r / rlen;
+                // [6] direction from the neighbour to i (pairs.glsl)
+                real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
                 // [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
                 //     compressed neighbourhood
                 real sj = scale * particle_alpha[j] * particle_residual[j];

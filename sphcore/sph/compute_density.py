@@ -17,6 +17,7 @@ from sphcore.sph.density_diffusion import density_diffusion
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 from sphcore.workgroups import launcher
 
 
@@ -39,6 +40,7 @@ def compute_density(spec, real=np.float32):
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
     hydrostatic_density, diffusion_term = density_diffusion(spec, real)
     equation_of_state_ = equation_of_state(spec, real)
 
@@ -114,21 +116,11 @@ def compute_density(spec, real=np.float32):
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
                     if not CONTINUITY or r2 >= P.h2 or (j == i and image == 0):
                         continue
-                    # [6] continuity: the direction r_hat from the neighbour to i, as in compute_forces (where
-                    #     the two coincide: an image along its plane's inward normal, two particles along x,
-                    #     antisymmetrically in (i, j)); an image's velocity is mirrored on its flipped axes
+                    # [6] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
+                    #     is mirrored on its flipped axes
                     rlen = np.sqrt(r2)
-                    r_hat_x = real(-1.0) if i < j else real(1.0)
-                    r_hat_y = real(0.0)
-                    r_hat_z = real(0.0)
-                    if fx:
-                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
-                    if fy:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
-                    if fz:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
-                    if rlen > real(0.0):
-                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
+                                                                      inward_y, inward_z)
                     vj_x = particle_v[j, 0]
                     vj_y = particle_v[j, 1]
                     vj_z = particle_v[j, 2]

@@ -15,6 +15,7 @@ from numba import njit
 from sphcore.sph.cells import cells
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 from sphcore.sph.viscosity import viscosity
 from sphcore.sph.walls import walls
 from sphcore.workgroups import launcher
@@ -32,6 +33,7 @@ def compute_forces(spec, real=np.float32):
     image_velocity = walls(spec, real)[2]
     viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
@@ -68,9 +70,6 @@ def compute_forces(spec, real=np.float32):
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
-            fx = (image & 1) != 0
-            fy = (image & 2) != 0
-            fz = (image & 4) != 0
             xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -104,17 +103,8 @@ def compute_forces(spec, real=np.float32):
                     #     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                     #     along its inward normal; two particles are pushed apart along x,
                     #     antisymmetrically in (i, j), so momentum is conserved
-                    r_hat_x = real(-1.0) if i < j else real(1.0)
-                    r_hat_y = real(0.0)
-                    r_hat_z = real(0.0)
-                    if fx:
-                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
-                    if fy:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
-                    if fz:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
-                    if rlen > real(0.0):
-                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
+                                                                      inward_y, inward_z)
                     # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
                     #     conserves momentum and energy with summation or continuity density (Monaghan 1992).
                     #     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates

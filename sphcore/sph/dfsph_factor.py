@@ -16,6 +16,7 @@ from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, DISPATCH_CHECK,
                                WARM_START, dispatch_base)
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 
 
 @lru_cache(maxsize=None)
@@ -25,6 +26,7 @@ def dfsph_factor(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
@@ -63,9 +65,6 @@ def dfsph_factor(spec, real=np.float32):
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
-            fx = (image & 1) != 0
-            fy = (image & 2) != 0
-            fz = (image & 4) != 0
             xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [4] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -92,19 +91,9 @@ def dfsph_factor(spec, real=np.float32):
                     if r2 >= P.h2:
                         continue
                     rlen = np.sqrt(r2)
-                    # [5] direction from the neighbour to i, as in compute_forces (coincident: an image
-                    #     along its plane's inward normal, two particles along x, antisymmetrically)
-                    r_hat_x = real(-1.0) if i < j else real(1.0)
-                    r_hat_y = real(0.0)
-                    r_hat_z = real(0.0)
-                    if fx:
-                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
-                    if fy:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
-                    if fz:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
-                    if rlen > real(0.0):
-                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    # [5] direction from the neighbour to i (pairs.glsl)
+                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
+                                                                      inward_y, inward_z)
                     g = coef * kernel_gradient(P, r2, rlen)
                     sum_grad_x -= g * r_hat_x
                     sum_grad_y -= g * r_hat_y

@@ -19,6 +19,7 @@ from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import SOLVE_DENSITY
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 
 
 @lru_cache(maxsize=None)
@@ -28,6 +29,7 @@ def dfsph_residual(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid, cell_start,
@@ -87,18 +89,9 @@ def dfsph_residual(spec, real=np.float32):
                     if r2 >= P.h2:
                         continue
                     rlen = np.sqrt(r2)
-                    # [6] direction from the neighbour to i, as in compute_forces
-                    r_hat_x = real(-1.0) if i < j else real(1.0)
-                    r_hat_y = real(0.0)
-                    r_hat_z = real(0.0)
-                    if fx:
-                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
-                    if fy:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
-                    if fz:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
-                    if rlen > real(0.0):
-                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    # [6] direction from the neighbour to i (pairs.glsl)
+                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
+                                                                      inward_y, inward_z)
                     # [7] the neighbour's (image's) velocity, mirrored on the flipped axes
                     vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
                     vj_y = particle_v[j, 1] + kick * particle_a[j, 1]

@@ -16,6 +16,7 @@ from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 from sphcore.workgroups import launcher
 
 
@@ -26,6 +27,7 @@ def dfsph_velocity(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
 
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, cell_pyramid,
@@ -62,9 +64,6 @@ def dfsph_velocity(spec, real=np.float32):
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
-            fx = (image & 1) != 0
-            fy = (image & 2) != 0
-            fz = (image & 4) != 0
             xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -91,18 +90,9 @@ def dfsph_velocity(spec, real=np.float32):
                     if r2 >= P.h2:
                         continue
                     rlen = np.sqrt(r2)
-                    # [6] direction from the neighbour to i, as in compute_forces
-                    r_hat_x = real(-1.0) if i < j else real(1.0)
-                    r_hat_y = real(0.0)
-                    r_hat_z = real(0.0)
-                    if fx:
-                        r_hat_x, r_hat_y, r_hat_z = inward_x, real(0.0), real(0.0)
-                    if fy:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
-                    if fz:
-                        r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
-                    if rlen > real(0.0):
-                        r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
+                    # [6] direction from the neighbour to i (pairs.glsl)
+                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
+                                                                      inward_y, inward_z)
                     # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
                     #     compressed neighbourhood
                     sj = scale * particle_alpha[j] * particle_residual[j]
