@@ -23,6 +23,14 @@ launch at once write the same entry, which is harmless; two processes compiling 
 different argument types at the same moment could cross their entries (every launch here is
 called with one set of types per specialization).
 
+Loaded entries share one process, and numba names a compiled function by its qualified name and a
+counter of the process that compiled it (numba/core/bytecode.py, `FunctionIdentity`): the body of
+count_cells for DIM 2, compiled in one run, and its body for DIM 3, compiled in another, can carry the
+same name, and the library loaded second then calls the first one's code (seen: a 3D count_cells that
+ignored z once a 2D one was loaded). So `cached` first appends its fingerprint to the qualified name of
+the launch and of every jitted function in its closure: functions of different code or constants can
+no longer share a name, and those that still do are the same function.
+
 Folder: $NUMBA_CACHE_DIR/sphcore where NUMBA_CACHE_DIR is set, else $SPHCORE_CACHE_DIR/numba,
 else ~/.cache/sphcore/numba (never inside the package, which may be installed read-only). Where
 the folder cannot be written, launches compile on every run, as without the cache.
@@ -40,6 +48,7 @@ from sphcore.paths import PACKAGE_DIR, cache_dir
 
 def cached(launch):
     """`launch` (a numba dispatcher) with its compiled code kept on disk across runs."""
+    _name_by_content(launch)
     try:
         launch._cache = MirrorCache(launch)
     except RuntimeError:  # no locator: the folder cannot be written
@@ -67,6 +76,18 @@ def fingerprint(func):
     digest = hashlib.sha256()
     _add_function(digest, func)
     return digest.hexdigest()
+
+
+def _name_by_content(func):
+    """Append to the qualified name of `func` (a jitted or Python function, not yet compiled) and of each
+    such function in its closure, helpers first, a hash of its code and closure (once per function)."""
+    func = getattr(func, "py_func", func)
+    if not inspect.isfunction(func) or getattr(func, "_sphcore_named", False):
+        return
+    for cell in func.__closure__ or ():
+        _name_by_content(cell.cell_contents)
+    func.__qualname__ += f"_{fingerprint(func)[:16]}"
+    func._sphcore_named = True
 
 
 def _add_function(digest, func):

@@ -1,9 +1,11 @@
 """The mirrors' compiled code on disk (sphcore/numba_cache.py): one entry per specialization, found
-again by a fresh process, and never another specialization's.
+again by a fresh process, and never another specialization's, also where entries compiled by
+different processes are loaded into one.
 
 Run as a script, this file is the probe: it runs compute_density once for each case below (all
-pairs, open domain: one stage to compile) and prints, per case, the density, what it needs for
-the reference, and the launch's cache hits and misses."""
+pairs, open domain: one stage to compile), or for those named on its command line, and prints, per
+case, the density, what it needs for the reference, and the launch's cache hits and misses; with
+`cells DIM...`, count_cells' cells instead."""
 import json
 import os
 import subprocess
@@ -17,12 +19,13 @@ CASES = {"mueller": ("mueller", "float32", 2), "wendland": ("wendland_c2", "floa
          "float64": ("mueller", "float64", 2), "3d": ("mueller", "float32", 3)}
 
 
-def probe():
+def probe(names=tuple(CASES)):
     from sphcore.backends import STAGES, Stage, empty_state, make_backend
     from sphcore.scene import Scene
 
     out = {}
-    for name, (kernel, precision, dim) in CASES.items():
+    for name in names:
+        kernel, precision, dim = CASES[name]
         scene = Scene.from_dict({"physics": {"dimension": dim, "kernel": kernel, "precision": precision,
                                              "neighbour_search": "all_pairs"},
                                  "domain": {"boundary": "open", "box_min": [-1.0] * dim, "box_max": [1.0] * dim},
@@ -42,9 +45,9 @@ def probe():
     return out
 
 
-def run_probe(cache_dir):
+def run_probe(cache_dir, names=()):
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"} | {"SPHCORE_CACHE_DIR": str(cache_dir)}
-    proc = subprocess.run([sys.executable, __file__], env=env, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, __file__, *names], env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     return json.loads(proc.stdout)
 
@@ -75,6 +78,41 @@ def test_a_second_process_loads_each_specialization_and_only_its_own(tmp_path):
         for run in (cold, warm):
             np.testing.assert_allclose(run[name]["rho"], reference_density(run[name], kernel), rtol=rtol, err_msg=name)
     assert not np.allclose(cold["mueller"]["rho"], cold["wendland"]["rho"], rtol=1e-3)  # the cases do differ
+
+
+def probe_cells(dims):
+    """particle_cell of count_cells, the one stage compiled, on a lattice in a walled box, per dimension."""
+    from sphcore.backends import Stage, empty_state, make_backend
+    from sphcore.scene import Scene
+
+    out = {}
+    for dim in dims:
+        scene = Scene.from_dict({"physics": {"dimension": dim}, "forces": {"gravity": [0.0] * dim},
+                                 "domain": {"box_min": [0.0] * dim, "box_max": [0.1] * dim},
+                                 "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.05] * dim}], "spacing": 0.01}})
+        x = scene.initial_positions()
+        params = scene.params(len(x))
+        state = empty_state(params)
+        state["particle_x"][:, :dim] = x
+        backend = make_backend("numba", params, state, [Stage("count_cells")], scene.spec)
+        backend.step()
+        out[str(dim)] = {"cell": backend.read_buffer("particle_cell").tolist(), "x": x.tolist(),
+                         "inv_cell": float(params[0]["inv_cell"]), "grid_dim": params[0]["grid_dim"].tolist()}
+    return out
+
+
+def test_entries_compiled_apart_load_into_one_process(tmp_path):
+    """count_cells for 2D and for 3D, each compiled by a process of its own (so numba numbers their
+    functions alike), then both loaded by one process: each finds its own cells (3D: z counts). With
+    numba's names alone, the one loaded second ran the first one's code."""
+    apart = {**run_probe(tmp_path, ["cells", "2"]), **run_probe(tmp_path, ["cells", "3"])}
+    together = run_probe(tmp_path, ["cells", "2", "3"])
+    for dim in ("2", "3"):
+        case = together[dim]
+        c = np.floor(np.asarray(case["x"], np.float32) * np.float32(case["inv_cell"])).astype(np.int64)
+        d = case["grid_dim"]
+        expected = c[:, 0] + d[0] * (c[:, 1] + (d[1] * c[:, 2] if dim == "3" else 0))
+        assert case["cell"] == expected.tolist() == apart[dim]["cell"], dim
 
 
 def test_cache_folder(monkeypatch, tmp_path):
@@ -112,4 +150,7 @@ def test_fingerprint_follows_the_closure_constants(other):
 
 
 if __name__ == "__main__":
-    print(json.dumps(probe()))
+    if sys.argv[1:2] == ["cells"]:
+        print(json.dumps(probe_cells([int(d) for d in sys.argv[2:]])))
+    else:
+        print(json.dumps(probe(sys.argv[1:] or tuple(CASES))))
