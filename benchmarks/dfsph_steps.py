@@ -6,6 +6,8 @@ pressure solver (config "graphics" or "dfsph", with --kernel), stepped for --ste
 steps, --per-submit steps per submit, the state left on the device: ms per step, and with each
 solver's mean dt from a full run (--dt-from: the JSONs of benchmarks/dfsph_gpu.sh, keyed by
 mm3d_<resolution>_<solver>.json) the wall time per simulated second. Printed and written as JSON.
+With --profile, each solver then runs --steps more steps with a GPU timestamp after every dispatch
+(sphcore.profile): its per-stage table is printed and saved in its row (the timed steps stay unprofiled).
 
     python3 benchmarks/dfsph_steps.py --backend vulkan --resolution 40 80 --dt-from benchmarks/results/dfsph/h200 \\
         --out benchmarks/results/dfsph/h200/steps.json
@@ -15,6 +17,7 @@ import json
 import time
 from pathlib import Path
 
+from sphcore.profile import Profile
 from sphcore.simulation import Simulation
 from sphcore.validate.dam_break import dam_break_scene
 
@@ -30,6 +33,7 @@ def main():
     ap.add_argument("--warm", type=int, default=10)
     ap.add_argument("--per-submit", type=int, default=10)
     ap.add_argument("--dt-from", help="folder of benchmarks/dfsph_gpu.sh's JSONs (each solver's mean dt)")
+    ap.add_argument("--profile", action="store_true", help="also a per-stage profile of each solver")
     ap.add_argument("--out")
     args = ap.parse_args()
     rows = []
@@ -37,7 +41,9 @@ def main():
         for solver, config in SOLVERS.items():
             scene = dam_break_scene({"dimension": 3, "resolution": r, "depth": r, "config": config,
                                      "kernel": args.kernel, "backend": args.backend})
-            with Simulation(scene, args.backend) as sim:
+            profile = Profile() if args.profile else None
+            with Simulation(scene, args.backend, **({"profile": profile} if profile else {})) as sim:
+                sim.backend.profile = None  # the timed steps: no timestamps
                 sim.advance(args.warm)
                 sim.read()
                 start = time.perf_counter()
@@ -47,6 +53,12 @@ def main():
                 seconds = (time.perf_counter() - start) / (args.steps // args.per_submit * args.per_submit)
                 row = {"resolution": r, "particles": sim.n, "solver": solver, "ms_per_step": 1e3 * seconds,
                        "device": getattr(getattr(sim.backend, "ctx", None), "device_name", "cpu (numba)")}
+                if profile:
+                    sim.backend.profile = profile
+                    sim.advance(args.steps)
+                    sim.backend.read_buffer("time_state")
+                    row["profile"] = profile.rows()
+                    print(profile.table(), flush=True)
             if args.dt_from:
                 full = json.loads((Path(args.dt_from) / f"mm3d_{r}_{solver}.json").read_text())
                 row.update(mean_dt=full["mean_dt"], wall_per_simulated_s=seconds / full["mean_dt"],

@@ -25,8 +25,8 @@ from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
-from sphcore.sph.dfsph import (CONTROL_SIZE, DISPATCH_CHECK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START,
-                               dispatch_base)
+from sphcore.sph.dfsph import (CONTROL_SIZE, DISPATCH_CHECK, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+                               SOLVE_WARM_START, dispatch_base)
 from sphcore.sph.dfsph_check import dfsph_check
 from sphcore.sph.dfsph_factor import dfsph_factor
 from sphcore.sph.dfsph_residual import dfsph_residual
@@ -43,7 +43,7 @@ from sphcore.workgroups import group_count
 REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
 PRECISIONS = ("float32", "float64")
 
-# binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | count)
+# binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | "neighbours" | count)
 BUFFERS = {
     "particle_x": (REAL, 4, "particles"),
     "particle_v": (REAL, 4, "particles"),
@@ -74,11 +74,15 @@ BUFFERS = {
     "dfsph_history": (np.float32, 8, 256),
     "particle_kappa": (REAL, 1, "particles"),
     "dfsph_partial": (REAL, 1, "particles"),
+    "dfsph_neighbours": (np.uint32, 1, "neighbours"),
+    "dfsph_neighbour_count": (np.uint32, 1, "particles"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
 # particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
 # dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
+# dfsph_neighbours, dfsph_neighbour_count: each particle's neighbour list for the solves' sweeps, written by
+# dfsph_factor (spec.MAX_NEIGHBOURS slots a particle: "neighbours" is n times that, at least 1 word);
 # dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
@@ -117,14 +121,14 @@ STAGES = {
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "cell_pyramid", "cell_start",
                                                  "obstacle_box", "particle_alpha", "dfsph_control",
-                                                 "particle_kappa")),
+                                                 "particle_kappa", "dfsph_neighbours", "dfsph_neighbour_count")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "cell_pyramid", "cell_start", "obstacle_box", "time_state",
-                                                     "particle_residual", "dfsph_partial")),
+                                                     "obstacle_box", "time_state", "particle_residual",
+                                                     "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count")),
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "particle_p", "cell_pyramid", "cell_start", "obstacle_box",
-                                                     "time_state", "particle_alpha", "particle_residual",
-                                                     "dfsph_control", "particle_kappa")),
+                                                     "particle_p", "obstacle_box", "time_state", "particle_alpha",
+                                                     "particle_residual", "dfsph_control", "particle_kappa",
+                                                     "dfsph_neighbours", "dfsph_neighbour_count")),
     "dfsph_check": (dfsph_check, "one", ("time_state", "dfsph_control", "dfsph_state", "dfsph_history",
                                          "dfsph_partial")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
@@ -190,9 +194,13 @@ def buffer_dtype(name, precision="float32"):
     return np.dtype(precision if dtype == REAL else dtype)
 
 
-def buffer_length(length, params):
+def buffer_length(length, params, max_neighbours=0):
+    """Elements of a buffer of BUFFERS' `length` for the parameter block `params` (and DFSPH's
+    spec.MAX_NEIGHBOURS list slots a particle)."""
     if length == "particles":
         return int(params[0]["n"])
+    if length == "neighbours":
+        return max(1, int(params[0]["n"]) * max_neighbours)
     if length == "cells":
         return int(params[0]["cell_total"])
     if length == "pyramid":
@@ -200,15 +208,16 @@ def buffer_length(length, params):
     return length
 
 
-def empty_state(params, precision="float32", obstacles=()):
+def empty_state(params, precision="float32", obstacles=(), max_neighbours=0):
     """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`,
+    DFSPH's neighbour lists of `max_neighbours` slots a particle (a scene's spec.MAX_NEIGHBOURS),
     and the box `obstacles` ([{"min": [...], "max": [...]}], a scene's domain.obstacles) in obstacle_box.
     A box's face that lies on a wall is no face: the box is continued through the wall by the tank's
     size (a box on the floor reaches below it), so that no particle slides between the two on the
     wall, and none inside the box is put back out through the wall (integrate.comp)."""
     state = {}
     for name, (_, c, length) in BUFFERS.items():
-        k = buffer_length(length, params)
+        k = buffer_length(length, params, max_neighbours)
         state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
@@ -234,6 +243,18 @@ def check_obstacles(state, spec):
             raise ValueError(f"the plan has {spec.OBSTACLES} obstacles but obstacle_box[{2 * k}:{2 * k + 2}] = "
                              f"{box[2 * k:2 * k + 2].tolist()} is not a box: pass the scene's domain.obstacles "
                              "to empty_state")
+
+
+def check_neighbours(state, spec):
+    """A DFSPH plan writes spec.MAX_NEIGHBOURS list slots a particle: the state must have room for
+    them (empty_state's `max_neighbours`), and every (j, image) must fit in a word (dfsph.glsl)."""
+    n = len(state["particle_id"])
+    if spec.DFSPH and len(state["dfsph_neighbours"]) < n * spec.MAX_NEIGHBOURS:
+        raise ValueError(f"the plan's neighbour lists need {n} x {spec.MAX_NEIGHBOURS} words but dfsph_neighbours "
+                         f"holds {len(state['dfsph_neighbours'])}: pass the scene's spec.MAX_NEIGHBOURS to empty_state")
+    if spec.DFSPH and (n > NEIGHBOUR_MASK or n * spec.MAX_NEIGHBOURS >= 2 ** 32):
+        raise ValueError(f"{n} particles with {spec.MAX_NEIGHBOURS} neighbour slots each: DFSPH's neighbour lists "
+                         f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 
 def in_particle_order(state, dim=None):
@@ -368,10 +389,9 @@ class VulkanBackend:
             self.ctx.timer(1).free()  # a device without timestamps says so now (VulkanError)
         self.shapes = {}
         self.buffers = {}
-        for name, (_, c, length) in BUFFERS.items():
-            k = buffer_length(length, params)
-            self.shapes[name] = (k, c) if c > 1 else (k,)
-            self.buffers[name] = self.ctx.buffer(k * c * self.dtypes[name].itemsize, name)
+        for name in BUFFERS:
+            self.shapes[name] = np.shape(state[name])
+            self.buffers[name] = self.ctx.buffer(int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize, name)
             self.buffers[name].write(np.asarray(state[name], self.dtypes[name]))
         self.local_size, self.spec_values = local_size, spec.values()
         self.pipelines = {}
@@ -466,4 +486,5 @@ def make_backend(name, params, state, stages, spec, **options):
     if name not in BACKENDS:
         raise ValueError(f"unknown backend {name!r}: choose one of {', '.join(BACKENDS)}")
     check_obstacles(state, spec)
+    check_neighbours(state, spec)
     return BACKENDS[name](params, state, stages, spec, **options)

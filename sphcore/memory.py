@@ -43,9 +43,10 @@ def particle_count(scene):
     return int(sum(np.prod(scene._lattice_shape(b)) for b in scene["fluid.blocks"]))
 
 
-def buffer_bytes(params, precision):
-    """name -> bytes of every buffer of sphcore.backends.BUFFERS for the parameter block `params`."""
-    return {name: buffer_length(length, params) * c * buffer_dtype(name, precision).itemsize
+def buffer_bytes(params, precision, max_neighbours=0):
+    """name -> bytes of every buffer of sphcore.backends.BUFFERS for the parameter block `params` (and
+    DFSPH's `max_neighbours` list slots a particle)."""
+    return {name: buffer_length(length, params, max_neighbours) * c * buffer_dtype(name, precision).itemsize
             for name, (_, c, length) in BUFFERS.items()}
 
 
@@ -57,7 +58,7 @@ def estimate(scene, backend="numba", device_in_host=None, n=None):
 
     n = particle_count(scene) if n is None else n
     precision = scene["physics.precision"]
-    sizes = buffer_bytes(scene.params(n), precision)
+    sizes = buffer_bytes(scene.params(n), precision, scene.spec.MAX_NEIGHBOURS)
     state = sum(sizes.values())
     carried = sum(sizes[name] for name in CARRIED if name in sizes)
     ordered = sum(size for name, size in sizes.items()

@@ -10,8 +10,10 @@ import warnings
 
 import numpy as np
 
+from sphcore.simulation import SimulationError
 from sphcore.sph.dfsph import (CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES, CONTROL_MAX_ITERATIONS,
-                               HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_FAILED_ERROR, STATE_TOLERANCE)
+                               CONTROL_OVERFLOW_STEP, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_FAILED_ERROR,
+                               STATE_TOLERANCE)
 
 LOG_COLUMNS = ("step", "dt", "time", "divergence_iterations", "divergence_error", "density_iterations",
                "density_error", "converged")
@@ -45,7 +47,7 @@ class SolverLog:
 
     def collect(self, backend, first, last):
         """Read the rows of steps first + 1 .. last (at most HISTORY_ROWS of them) and report what did
-        not converge (the control block is read only where a row says so: one readback per call)."""
+        not converge; raise SimulationError if a particle's neighbour list overflowed (two readbacks)."""
         if last - first > HISTORY_ROWS:
             raise ValueError(f"steps {first + 1}..{last}: the history ring holds {HISTORY_ROWS} steps")
         if last <= first:
@@ -56,13 +58,23 @@ class SolverLog:
             if int(row[0]) != step:  # the step count is the device's and the host's: they cannot differ
                 raise RuntimeError(f"DFSPH history: row for step {step} holds step {int(row[0])}")
             self.rows[step] = row
-        if all(self.rows[step][7] == 1 for step in range(first + 1, last + 1)):
-            return
         control = backend.read_buffer("dfsph_control")
+        if control[CONTROL_OVERFLOW_STEP]:
+            self.overflow(backend, int(control[CONTROL_OVERFLOW_STEP]), last)
         failures = int(control[CONTROL_FAILURES])
         if failures > self.reported:
             self.warn(control, backend.read_buffer("dfsph_state"), failures, last)
             self.reported = failures
+
+    def overflow(self, backend, step, last):
+        scene = self.scene
+        count = backend.read_buffer("dfsph_neighbour_count")
+        k = int(np.argmax(count))
+        raise SimulationError(
+            f"step {step}: a particle had more neighbours and wall images within h than its neighbour list's "
+            f"{scene.max_neighbours} slots (fluid.max_neighbours); at step {last} particle "
+            f"{int(backend.read_buffer('particle_id')[k])} has {int(count[k])}. The solves would lose pairs, so the run "
+            "stops here: raise fluid.max_neighbours, or look for particles crowding together (a blow-up)")
 
     def warn(self, control, state, failures, last):
         scene = self.scene

@@ -108,7 +108,7 @@ def work(scene, position):
     from sphcore.backends import BUFFERS, STAGES, buffer_dtype, buffer_length, plan
 
     params = scene.params(len(position))
-    sizes = {name: buffer_length(length, params) * c * buffer_dtype(name, scene["physics.precision"]).itemsize
+    sizes = {name: buffer_length(length, params, scene.spec.MAX_NEIGHBOURS) * c * buffer_dtype(name, scene["physics.precision"]).itemsize
              for name, (_, c, length) in BUFFERS.items()}
     return stage_bytes(plan(scene), {name: entry[2] for name, entry in STAGES.items()}, sizes), pair_tests(scene, position)
 

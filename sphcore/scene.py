@@ -151,6 +151,10 @@ SCHEMA = {
                                     "stops when the mean compression rate times dt is at most this"),
         "max_iterations": Key(100, "-", 2, 1000, 'physics.pressure_solver = "dfsph": updates per solve and step at '
                               "most (recorded on the device); a solve that reaches it unconverged is reported", "int"),
+        "max_neighbours": Key(0, "-", 0, 1024, 'physics.pressure_solver = "dfsph": slots of each particle\'s neighbour '
+                              "list (its neighbours and their wall images within h, which the solves' sweeps walk); 0: "
+                              "twice the particles of a ball of radius h at the spacing. A particle with more stops the "
+                              "run, naming the step", "int"),
     },
     "forces": {
         "gravity": Key([0.0, -9.81], "m/s^2", -1e4, 1e4, "gravitational acceleration", "vec"),
@@ -546,6 +550,16 @@ class Scene:
         return rho0 * abs(g[axis]) * np.maximum(depth, 0.0)
 
     @property
+    def max_neighbours(self):
+        """Slots of a DFSPH neighbour list: fluid.max_neighbours, or (0) twice the lattice particles in a
+        ball of radius h (pi r^2, 4/3 pi r^3 with r = fluid.smoothing_ratio): the solver holds the density
+        within a fraction of a percent of rest, and the wall images fill a ball cut by the walls."""
+        if self["fluid.max_neighbours"] > 0:
+            return self["fluid.max_neighbours"]
+        r = self["fluid.smoothing_ratio"]
+        return math.ceil(2 * (math.pi * r * r if self.dim == 2 else 4 / 3 * math.pi * r ** 3))
+
+    @property
     def spec(self):
         """The scene's compile-time choices (specialization constants of every shader)."""
         physics = self.config["physics"]
@@ -557,7 +571,8 @@ class Scene:
                     DENSITY_DIFFUSION=DENSITY_DIFFUSIONS.index(physics["density_diffusion"]),
                     VISCOSITY_MODEL=("laminar", "artificial").index(physics["viscosity_model"]),
                     NO_SLIP=self["domain.wall_model"] == "no_slip", VERLET=self["time.integrator"] == "verlet",
-                    ADAPTIVE_DT=self.adaptive_dt, DFSPH=self.dfsph)
+                    ADAPTIVE_DT=self.adaptive_dt, DFSPH=self.dfsph,
+                    MAX_NEIGHBOURS=self.max_neighbours if self.dfsph else 0)
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""

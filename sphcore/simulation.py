@@ -69,7 +69,8 @@ class Simulation:
         x0 = scene.initial_positions()
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
-        state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"])
+        state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
+                            scene.spec.MAX_NEIGHBOURS)
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
         if scene.dfsph:

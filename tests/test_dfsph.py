@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 from conftest import assert_stage_agrees, vulkan_or_skip
-from sphcore.backends import empty_state, plan
+from reference import neighbours
+from sphcore.backends import Stage, empty_state, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
 from sphcore.scene import Scene, SceneError
-from sphcore.simulation import Simulation, run
-from sphcore.sph.dfsph import SOLVE_DENSITY, SOLVE_DIVERGENCE, dispatch_base
+from sphcore.simulation import Simulation, SimulationError, run
+from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, dispatch_base
 from sphcore.workgroups import group_count
 
 # a 2D water column (10 x 10 particles) in a 0.3 m x 0.2 m tank: it starts to collapse
@@ -51,6 +52,7 @@ def log_of(sim):
     ("fluid.max_iterations", 1), ("fluid.max_iterations", 2.5), ("fluid.max_iterations", 10**6),
     ("time.cfl_number", 0.0), ("time.cfl_number", 2.0), ("time.cfl_number", True),
     ("physics.density", "continuity"), ("time.integrator", "verlet"),
+    ("fluid.max_neighbours", -1), ("fluid.max_neighbours", 2.5), ("fluid.max_neighbours", 5000),
 ])
 def test_bad_values_are_rejected_naming_the_key(key, value):
     with pytest.raises(SceneError) as e:
@@ -127,6 +129,48 @@ def test_variants_run_and_converge_on_lavapipe(variant):
     assert all(np.isfinite(v).all() for v in state.values())
     assert (log[:, 7] == 1).all(), f"unconverged steps:\n{log}"
     assert (log[:, 6] <= scene["fluid.max_density_error"]).all()
+
+
+def test_neighbour_lists_hold_every_pair_within_h():
+    """dfsph_factor's lists, decoded, are the all-pairs reference's (neighbour, wall image) sets within h,
+    on a column collapsing in the tank's corner (images across both walls); only pairs within float32
+    rounding of h may differ."""
+    scene = scene_of()
+    with Simulation(scene, "numba") as sim:
+        sim.advance(5)
+        for stage in sim.stages[:sim.stages.index(Stage("dfsph_factor")) + 1]:
+            sim.backend.run_stage(stage)
+        st = sim.backend.state
+        n, slots = sim.n, scene.max_neighbours
+        x = st["particle_x"][:, :2].astype(np.float64)
+        count = st["dfsph_neighbour_count"].copy()
+        lists = st["dfsph_neighbours"].reshape(slots, n).T.copy()
+    assert slots == 26 and len(lists) == n and 0 < count.max() <= slots
+    expected = neighbours(x, scene.h, scene["domain.box_min"], scene["domain.box_max"])
+    images = 0
+    for i in range(n):
+        pairs = lists[i, :count[i]]
+        found = {(int(p & NEIGHBOUR_MASK), tuple(-1.0 if (p >> IMAGE_SHIFT) >> a & 1 else 1.0 for a in range(2)))
+                 for p in pairs}
+        assert len(found) == count[i], f"particle {i}: a pair listed twice"
+        for j, flip in found ^ expected[i]:
+            xk = np.where(np.array(flip) < 0, 2 * np.where(x[i] - scene["domain.box_min"] < scene.h,
+                                                           scene["domain.box_min"], scene["domain.box_max"]) - x[j], x[j])
+            assert abs(np.linalg.norm(x[i] - xk) - scene.h) < 1e-6, f"particle {i}: pair ({j}, {flip}) differs"
+        images += sum(1 for p in pairs if p >> IMAGE_SHIFT)
+    assert images > n / 2  # the corner's column sees wall images
+
+
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_neighbour_list_overflow_stops_the_run_naming_the_step(backend):
+    if backend == "vulkan":
+        vulkan_or_skip()
+    scene = scene_of(**{"fluid.max_neighbours": 6})
+    with Simulation(scene, backend) as sim:
+        with pytest.raises(SimulationError, match=r"step 1: a particle had more neighbours and wall images within h "
+                                                  r"than its neighbour list's 6 slots \(fluid.max_neighbours\); at step 2 "
+                                                  r"particle \d+ has (\d+)"):
+            sim.advance(2)
 
 
 def test_compressed_block_converges_to_the_tolerance():

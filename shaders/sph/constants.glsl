@@ -28,3 +28,5 @@ layout(constant_id = 18) const bool ADAPTIVE_DT = false;  // dt reduced on the d
 // Incompressible pressure solver (issue 14): DFSPH (Bender & Koschier 2015, 2017), else the state equation.
 layout(constant_id = 19) const bool DFSPH = false;        // physics.pressure_solver = "dfsph": dfsph_*.comp solve
                                                           // for the pressure; compute_forces adds no pressure term
+layout(constant_id = 20) const uint MAX_NEIGHBOURS = 0;   // DFSPH: slots per particle of its neighbour list
+                                                          // (dfsph.glsl; fluid.max_neighbours)

@@ -9,7 +9,14 @@
 //   -> compute_forces (no pressure term) -> reduce_dt, choose_dt (CFL on the particle speed)
 //   -> constant-density solve (solve 2) -> integrate (v += dt a, x += dt v).
 // A solve is dfsph_residual, dfsph_check, then max_iterations times [dfsph_velocity, dfsph_residual,
-// dfsph_check], all recorded into the command buffer (no readback). The stage's solve is P.level
+// dfsph_check], all recorded into the command buffer (no readback). The positions do not move during
+// the solves, so dfsph_factor's scan of the grid cells also writes each particle's neighbour list: its
+// neighbours and their wall and obstacle images within h, in the scan's order, as j | image << IMAGE_SHIFT
+// in dfsph_neighbours[slot * n + i] (slot < MAX_NEIGHBOURS: consecutive invocations read consecutive
+// words), their number in dfsph_neighbour_count[i]. Every sweep of the solves walks that list: the sums
+// run in the scan's order, with the same terms, over a fifth (2D) or a seventh (3D) of the candidates.
+// A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
+// (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level
 // (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order
 // in two levels: each dfsph_residual work group sums its residuals in order (dfsph_partial), and
 // dfsph_check, one work group, sums those. Once the mean is under the tolerance (after the minimum
@@ -44,10 +51,15 @@ const uint CONTROL_FAILURES = 6u;       // solves that spent their budget unconv
 const uint CONTROL_FAILED_STEP = 7u;    // the first of them: its step (1 = the first step)
 const uint CONTROL_FAILED_SOLVE = 8u;   //   and its solve
 const uint CONTROL_MAX_ITERATIONS = 9u; // fluid.max_iterations (host)
+const uint CONTROL_OVERFLOW_STEP = 10u; // the first step (1 = the first) at which a particle had more than
+                                        // MAX_NEIGHBOURS neighbours and images within h; 0: none
 const uint CONTROL_DISPATCH = 16u;      // [dispatch_base(solve)]: the solve's indirect dispatch arguments,
 const uint DISPATCH_CHECK = 4u;         //   (x, y, z) work groups of its dfsph_velocity and dfsph_residual,
                                         //   and at + DISPATCH_CHECK those of its dfsph_check
 const uint CONTROL_SIZE = 32u;
+
+const uint IMAGE_SHIFT = 29u;           // dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)
+const uint NEIGHBOUR_MASK = (1u << IMAGE_SHIFT) - 1u;
 
 uint dispatch_base(uint solve) { return CONTROL_DISPATCH + 8u * (solve - 1u); }
 

@@ -4,7 +4,8 @@
 // neighbours and their wall and obstacle images (as in compute_density). Also starts the step's two
 // solves (dfsph.glsl): invocation 0 clears their done flags and iteration counts and sets their indirect
 // dispatches' work groups (one invocation per particle, and one group for the check); every particle's
-// pressure is cleared and its stiffness sum scaled to the warm start (WARM_START).
+// pressure is cleared and its stiffness sum scaled to the warm start (WARM_START). The scan also writes the
+// particle's neighbour list, which every sweep of the solves walks (dfsph.glsl).
 // Mirror: sphcore/sph/dfsph_factor.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -26,6 +27,8 @@ layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 22) writeonly buffer ParticleAlpha { real particle_alpha[]; };
 layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
+layout(std430, binding = 29) writeonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 30) writeonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 
 void main() {
     // [1] one invocation per particle; invocation 0 also starts the step's solves
@@ -53,10 +56,12 @@ void main() {
     real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [3] sums over every other particle and every image within h of g = V grad_i W_ij = -coef
-    //     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2
+    //     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; each
+    //     of them into the list, in the scan's order (dfsph.glsl)
     real coef = real(P.pressure_coef) / real(P.rest_density);
     real3 sum_grad = real3(0.0);
     real sum_grad2 = real(0.0);
+    uint count = 0u;
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
         real3 xm = reflected(xi, wall, image);
@@ -85,6 +90,8 @@ void main() {
                 real g = coef * kernel_gradient(r2, rlen);
                 sum_grad -= g * r_hat;
                 sum_grad2 += g * g;
+                if (count < MAX_NEIGHBOURS) dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT);
+                count += 1u;
             }
         }
     }
@@ -97,4 +104,9 @@ void main() {
     particle_alpha[i] = alpha;
     particle_p[i] = real(0.0);
     particle_kappa[i] = real(WARM_START) * particle_kappa[i];
+    // [8] the list's length; one too long for its MAX_NEIGHBOURS slots marks the step (the same value from
+    //     every invocation that writes it), and the host stops the run
+    dfsph_neighbour_count[i] = count;
+    if (count > MAX_NEIGHBOURS && dfsph_control[CONTROL_OVERFLOW_STEP] == 0u)
+        dfsph_control[CONTROL_OVERFLOW_STEP] = dfsph_control[CONTROL_STEP] + 1u;
 }

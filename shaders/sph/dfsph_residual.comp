@@ -1,7 +1,8 @@
 #version 460
 // DFSPH's residual r_i of solve P.level (dfsph.glsl), one invocation per particle: the density
-// ratio's rate d_i = sum_j V (v_i - v_j) . grad W_ij over the neighbours and their wall and obstacle
-// images (an image's velocity mirrored on its flipped axes, as compute_density's continuity rate).
+// ratio's rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor: the neighbours
+// and their wall and obstacle images; an image's velocity mirrored on its flipped axes, as compute_density's
+// continuity rate).
 //   divergence-free solve: r_i = max(d_i, 0) [1/s], with the velocity v;
 //   constant-density solve: r_i = max(rho_i / rho_0 + dt d_i - 1, 0), with v* = v + dt a (the velocity
 //   the step would integrate) and this step's dt (time_state, choose_dt.comp).
@@ -28,11 +29,11 @@ layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
-layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
-layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_residual[]; };
 layout(std430, binding = 28) writeonly buffer DfsphPartial { real dfsph_partial[]; };
+layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 
 shared real s_residual[gl_WorkGroupSize.x];
 
@@ -49,52 +50,37 @@ void main() {
         real kick = solve == SOLVE_DENSITY ? dt : real(0.0);
         real3 xi = particle_x[i].xyz;
         real3 vi = particle_v[i].xyz + kick * particle_a[i].xyz;
-        // [3] wall and obstacle images as in compute_density
+        // [3] the walls and obstacle faces the images are mirrored across, as in compute_density
         real3 wall;
         uint mirrored = near_walls(xi, wall);
         real3 inward;
         mirrored = near_obstacles(xi, mirrored, wall, inward);
-        // [4] d_i over every other particle and every image within h
+        // [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
         real coef = real(P.pressure_coef) / real(P.rest_density);
         real d = real(0.0);
-        for (uint image = 0u; image < 8u; ++image) {
-            if ((image & ~mirrored) != 0u) continue;
+        uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+        for (uint slot = 0u; slot < count; ++slot) {
+            // [5] the neighbour j, or its image across the walls whose bits are set in `image`
+            uint pair = dfsph_neighbours[slot * P.n + i];
+            uint j = pair & NEIGHBOUR_MASK;
+            uint image = pair >> IMAGE_SHIFT;
             bool fx = (image & 1u) != 0u;
             bool fy = (image & 2u) != 0u;
             bool fz = (image & 4u) != 0u;
-            real3 xm = reflected(xi, wall, image);
-            ivec3 base = cell_of(xm);
-            // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
-            for (uint k = 0u; k < range_count(); ++k) {
-                uint start = 0u;
-                uint end = P.n;
-                if (GRID) {
-                    int first;
-                    int last;
-                    if (!range_cells(base, k, first, last)) continue;
-                    start = cell_start[first];
-                    end = cell_start[last] + cell_pyramid[last];
-                }
-                for (uint j = start; j < end; ++j) {
-                    if (j == i && image == 0u) continue;
-                    real3 xk = reflected(particle_x[j].xyz, wall, image);
-                    if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
-                    real3 r = xi - xk;
-                    real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-                    if (r2 >= P.h2) continue;
-                    real rlen = sqrt(r2);
-                    // [6] direction from the neighbour to i (pairs.glsl)
-                    real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-                    // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
-                    real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
-                    real vk_x = fx ? -vj.x : vj.x;
-                    real vk_y = fy ? -vj.y : vj.y;
-                    real vk_z = fz ? -vj.z : vj.z;
-                    real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
-                    // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-                    d -= coef * kernel_gradient(r2, rlen) * v_r;
-                }
-            }
+            real3 xk = reflected(particle_x[j].xyz, wall, image);
+            real3 r = xi - xk;
+            real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+            real rlen = sqrt(r2);
+            // [6] direction from the neighbour to i (pairs.glsl)
+            real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
+            // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+            real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
+            real vk_x = fx ? -vj.x : vj.x;
+            real vk_y = fy ? -vj.y : vj.y;
+            real vk_z = fz ? -vj.z : vj.z;
+            real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+            // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+            d -= coef * kernel_gradient(r2, rlen) * v_r;
         }
         // [9] the residual: compression only
         residual = max(d, real(0.0));

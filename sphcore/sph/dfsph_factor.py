@@ -1,6 +1,7 @@
 """DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11), one invocation per particle, after
 compute_density; invocation 0 also starts the step's two solves (dfsph.py: their flags, counts and
-indirect dispatches), and every particle's pressure starts from 0.
+indirect dispatches), and every particle's pressure starts from 0. The scan also writes the particle's
+neighbour list, which every sweep of the solves walks (dfsph.py).
 
 Mirror of shaders/sph/dfsph_factor.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -12,8 +13,8 @@ from numba import njit, prange
 
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, DISPATCH_CHECK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
-                               WARM_START, dispatch_base)
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, CONTROL_OVERFLOW_STEP, CONTROL_STEP, DISPATCH_CHECK,
+                               IMAGE_SHIFT, SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START, dispatch_base)
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
@@ -25,12 +26,13 @@ def dfsph_factor(spec, real=np.float32):
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
+    MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
-                          particle_alpha, dfsph_control, particle_kappa):
+                          particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
         if i >= P.n:
@@ -56,12 +58,14 @@ def dfsph_factor(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [3] sums over every other particle and every image within h of g = V grad_i W_ij = -coef
-        #     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2
+        #     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; each
+        #     of them into the list, in the scan's order (dfsph.py)
         coef = real(P.pressure_coef) / real(P.rest_density)
         sum_grad_x = real(0.0)
         sum_grad_y = real(0.0)
         sum_grad_z = real(0.0)
         sum_grad2 = real(0.0)
+        count = 0
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
@@ -99,6 +103,9 @@ def dfsph_factor(spec, real=np.float32):
                     sum_grad_y -= g * r_hat_y
                     sum_grad_z -= g * r_hat_z
                     sum_grad2 += g * g
+                    if count < MAX_NEIGHBOURS:
+                        dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT)
+                    count += 1
         # [6] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
         s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
         alpha = real(0.0)
@@ -109,13 +116,19 @@ def dfsph_factor(spec, real=np.float32):
         particle_alpha[i] = alpha
         particle_p[i] = real(0.0)
         particle_kappa[i] = real(WARM_START) * particle_kappa[i]
+        # [8] the list's length; one too long for its MAX_NEIGHBOURS slots marks the step (the same value from
+        #     every invocation that writes it), and the host stops the run
+        dfsph_neighbour_count[i] = count
+        if count > MAX_NEIGHBOURS and dfsph_control[CONTROL_OVERFLOW_STEP] == 0:
+            dfsph_control[CONTROL_OVERFLOW_STEP] = dfsph_control[CONTROL_STEP] + 1
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
-               particle_alpha, dfsph_control, particle_kappa):
+               particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count):
         for group in prange(n_groups):
             for lid in range(local_size):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, cell_pyramid,
-                                  cell_start, obstacle_box, particle_alpha, dfsph_control, particle_kappa)
+                                  cell_start, obstacle_box, particle_alpha, dfsph_control, particle_kappa,
+                                  dfsph_neighbours, dfsph_neighbour_count)
 
     return cached(launch)

@@ -1,5 +1,5 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
-rate d_i = sum_j V (v_i - v_j) . grad W_ij; divergence-free solve r_i = max(d_i, 0), constant-density
+rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve r_i = max(d_i, 0), constant-density
 solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a; each work group's residuals summed
 in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
 
@@ -16,7 +16,7 @@ from numba import njit, prange
 
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import SOLVE_DENSITY
+from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
@@ -24,16 +24,15 @@ from sphcore.sph.pairs import pairs
 
 @lru_cache(maxsize=None)
 def dfsph_residual(spec, real=np.float32):
-    GRID = spec.GRID
+    MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
-    OBSTACLES = spec.OBSTACLES
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
 
     @njit
-    def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid, cell_start,
-                            obstacle_box, time_state, particle_residual):
+    def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
+                            particle_residual, dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
         #     invocation of the group reaches the barrier, with a residual of 0 past the last particle
@@ -50,58 +49,40 @@ def dfsph_residual(spec, real=np.float32):
         vi_x = particle_v[i, 0] + kick * particle_a[i, 0]
         vi_y = particle_v[i, 1] + kick * particle_a[i, 1]
         vi_z = particle_v[i, 2] + kick * particle_a[i, 2]
-        # [3] wall and obstacle images as in compute_density
+        # [3] the walls and obstacle faces the images are mirrored across, as in compute_density
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
-        # [4] d_i over every other particle and every image within h
+        # [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
         coef = real(P.pressure_coef) / real(P.rest_density)
         d = real(0.0)
-        for image in range(8):
-            if (image & ~mirrored) != 0:
-                continue
+        count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        for slot in range(count):
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`
+            pair = int(dfsph_neighbours[slot * P.n + i])
+            j = pair & NEIGHBOUR_MASK
+            image = pair >> IMAGE_SHIFT
             fx = (image & 1) != 0
             fy = (image & 2) != 0
             fz = (image & 4) != 0
-            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
-            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
-            for k in range(range_count()):
-                start = 0
-                end = int(P.n)
-                if GRID:
-                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
-                    if not inside:
-                        continue
-                    start = int(cell_start[first])
-                    end = int(cell_start[last]) + int(cell_pyramid[last])
-                for j in range(start, end):
-                    if j == i and image == 0:
-                        continue
-                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
-                                           wall_x, wall_y, wall_z, image)
-                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
-                        continue  # (obstacles.glsl)
-                    r_x = xi_x - xk
-                    r_y = xi_y - yk
-                    r_z = xi_z - zk
-                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
-                    if r2 >= P.h2:
-                        continue
-                    rlen = np.sqrt(r2)
-                    # [6] direction from the neighbour to i (pairs.glsl)
-                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
-                                                                      inward_y, inward_z)
-                    # [7] the neighbour's (image's) velocity, mirrored on the flipped axes
-                    vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
-                    vj_y = particle_v[j, 1] + kick * particle_a[j, 1]
-                    vj_z = particle_v[j, 2] + kick * particle_a[j, 2]
-                    vk_x = -vj_x if fx else vj_x
-                    vk_y = -vj_y if fy else vj_y
-                    vk_z = -vj_z if fz else vj_z
-                    v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
-                    # [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-                    d -= coef * kernel_gradient(P, r2, rlen) * v_r
+            xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2], wall_x, wall_y, wall_z, image)
+            r_x = xi_x - xk
+            r_y = xi_y - yk
+            r_z = xi_z - zk
+            r2 = r_x * r_x + r_y * r_y + r_z * r_z
+            rlen = np.sqrt(r2)
+            # [6] direction from the neighbour to i (pairs.glsl)
+            r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
+            # [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+            vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
+            vj_y = particle_v[j, 1] + kick * particle_a[j, 1]
+            vj_z = particle_v[j, 2] + kick * particle_a[j, 2]
+            vk_x = -vj_x if fx else vj_x
+            vk_y = -vj_y if fy else vj_y
+            vk_z = -vj_z if fz else vj_z
+            v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
+            # [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+            d -= coef * kernel_gradient(P, r2, rlen) * v_r
         # [9] the residual: compression only
         residual = max(d, real(0.0))
         if solve == SOLVE_DENSITY:
@@ -119,14 +100,14 @@ def dfsph_residual(spec, real=np.float32):
         dfsph_partial[group] = total
 
     @njit(parallel=True, error_model="numpy")
-    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, cell_pyramid,
-               cell_start, obstacle_box, time_state, particle_residual, dfsph_partial):
+    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
+               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count):
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
                 s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
-                                                      particle_a, particle_rho, cell_pyramid, cell_start,
-                                                      obstacle_box, time_state, particle_residual)
+                                                      particle_a, particle_rho, obstacle_box, time_state,
+                                                      particle_residual, dfsph_neighbours, dfsph_neighbour_count)
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
 

@@ -1,5 +1,5 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
--sum_j V (s_i + s_j) grad W_ij, s_j = alpha_j r_j (divergence-free) or alpha_j r_j / dt^2 (constant
+-sum_j V (s_i + s_j) grad W_ij over its neighbour list (dfsph_factor), s_j = alpha_j r_j (divergence-free) or alpha_j r_j / dt^2 (constant
 density), added to the velocity (divergence-free) or to the acceleration, with the pressure
 accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
 (dfsph_check); invocation 0 counts the update.
@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.dfsph import CONTROL_ITERATIONS, IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DIVERGENCE, SOLVE_WARM_START
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
@@ -22,17 +22,16 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def dfsph_velocity(spec, real=np.float32):
-    GRID = spec.GRID
+    MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
-    OBSTACLES = spec.OBSTACLES
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
 
     @njit
-    def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, cell_pyramid,
-                            cell_start, obstacle_box, time_state, particle_alpha, particle_residual, dfsph_control,
-                            particle_kappa):
+    def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
+                            time_state, particle_alpha, particle_residual, dfsph_control, particle_kappa,
+                            dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
         #     invocation 0 counts the update
@@ -52,56 +51,38 @@ def dfsph_velocity(spec, real=np.float32):
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
         xi_z = particle_x[i, 2]
-        # [3] wall and obstacle images as in compute_density
+        # [3] the walls and obstacle faces the images are mirrored across, as in compute_density
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
-        # [4] the change over every other particle and every image within h
+        # [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
         coef = real(P.pressure_coef) / real(P.rest_density)
         change_x = real(0.0)
         change_y = real(0.0)
         change_z = real(0.0)
-        for image in range(8):
-            if (image & ~mirrored) != 0:
-                continue
-            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
-            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
-            for k in range(range_count()):
-                start = 0
-                end = int(P.n)
-                if GRID:
-                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
-                    if not inside:
-                        continue
-                    start = int(cell_start[first])
-                    end = int(cell_start[last]) + int(cell_pyramid[last])
-                for j in range(start, end):
-                    if j == i and image == 0:
-                        continue
-                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
-                                           wall_x, wall_y, wall_z, image)
-                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
-                        continue  # (obstacles.glsl)
-                    r_x = xi_x - xk
-                    r_y = xi_y - yk
-                    r_z = xi_z - zk
-                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
-                    if r2 >= P.h2:
-                        continue
-                    rlen = np.sqrt(r2)
-                    # [6] direction from the neighbour to i (pairs.glsl)
-                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
-                                                                      inward_y, inward_z)
-                    # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
-                    #     compressed neighbourhood
-                    sj = scale * particle_alpha[j] * particle_residual[j]
-                    if warm:
-                        sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
-                    t = coef * kernel_gradient(P, r2, rlen) * (si + sj)
-                    change_x += t * r_hat_x
-                    change_y += t * r_hat_y
-                    change_z += t * r_hat_z
+        count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        for slot in range(count):
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`
+            pair = int(dfsph_neighbours[slot * P.n + i])
+            j = pair & NEIGHBOUR_MASK
+            image = pair >> IMAGE_SHIFT
+            xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2], wall_x, wall_y, wall_z, image)
+            r_x = xi_x - xk
+            r_y = xi_y - yk
+            r_z = xi_z - zk
+            r2 = r_x * r_x + r_y * r_y + r_z * r_z
+            rlen = np.sqrt(r2)
+            # [6] direction from the neighbour to i (pairs.glsl)
+            r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
+            # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+            #     compressed neighbourhood
+            sj = scale * particle_alpha[j] * particle_residual[j]
+            if warm:
+                sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
+            t = coef * kernel_gradient(P, r2, rlen) * (si + sj)
+            change_x += t * r_hat_x
+            change_y += t * r_hat_y
+            change_z += t * r_hat_z
         # [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
         #     (constant density; only the warm start reads the sum of others, and it writes none)
         if solve == SOLVE_DIVERGENCE:
