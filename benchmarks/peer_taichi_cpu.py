@@ -73,8 +73,14 @@ def run_numba(scene, x0, threads, min_seconds):
     return row
 
 
-def run_taichi(ti, scene, x0, threads, min_seconds):
-    ti.init(arch=ti.cpu, cpu_max_num_threads=threads, default_fp=ti.f32, log_level=ti.WARN)
+def run_taichi(ti, scene, x0, threads, min_seconds, arch=None):
+    """The Taichi side on `arch` (default ti.cpu with `threads` threads; peer_taichi_gpu.py: ti.cuda, where
+    the cell offsets come from Taichi's parallel PrefixSumExecutor instead of the serial loop)."""
+    gpu = arch is not None and arch != ti.cpu
+    if gpu:
+        ti.init(arch=arch, default_fp=ti.f32, log_level=ti.WARN)
+    else:
+        ti.init(arch=ti.cpu, cpu_max_num_threads=threads, default_fp=ti.f32, log_level=ti.WARN)
     n = len(x0)
     P = scene.params(n)[0]
     # compile-time constants, all from sphcore's folded parameter block (float32 values)
@@ -116,6 +122,35 @@ def run_taichi(ti, scene, x0, threads, min_seconds):
             d = start[cell[i]] + slot[i]
             xs[d] = x[i]
             vs[d] = v[i]
+
+    @ti.kernel
+    def bin_particles():
+        # GPU: the counting sort's count; its inclusive prefix sum is PrefixSumExecutor's (on `start`)
+        for c in count:
+            count[c] = 0
+        for i in x:
+            c = cell_of(x[i])
+            cell[i] = (c.z * gd[1] + c.y) * gd[0] + c.x
+            slot[i] = ti.atomic_add(count[cell[i]], 1)
+        for c in count:
+            start[c] = count[c]
+
+    @ti.kernel
+    def scatter_particles():
+        for c in start:  # inclusive -> exclusive
+            start[c] -= count[c]
+        for i in x:
+            d = start[cell[i]] + slot[i]
+            xs[d] = x[i]
+            vs[d] = v[i]
+
+    if gpu:
+        scan = ti.algorithms.PrefixSumExecutor(ncell)
+
+        def sort_by_cell():  # noqa: F811 (the GPU's sort)
+            bin_particles()
+            scan.run(start)
+            scatter_particles()
 
     @ti.kernel
     def compute_density():

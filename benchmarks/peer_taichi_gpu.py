@@ -1,0 +1,92 @@
+"""Peer benchmark on one GPU: sphcore's Vulkan step beside a Taichi CUDA port of the same step, in one
+process, one after the other, at each particle count.
+
+The case and constants are peer_taichi_cpu.py's (steps_per_second.py's 3D dam break: Tait, h = 2 dx,
+about 33 neighbours, a counting sort every step); the Taichi side is peer_taichi_cpu.py's `run_taichi`
+with `ti.init(arch=ti.cuda)` and the cell offsets from Taichi's parallel PrefixSumExecutor. sphcore
+runs through steps_per_second.py's `time_case` (--steps-per-submit steps per command buffer, the
+state on the device). Each side is timed for --min-seconds after its warm-up. Prints a table, writes
+a JSON after every count (a killed run keeps what it measured) and, where matplotlib is importable,
+a PNG beside it; `--plot FILE.json` draws the PNG from a JSON alone (the GPU machine has no
+matplotlib).
+
+The GPU machine has no Taichi: its cp312 wheel without taichi/_lib/c_api (unused by the Python API),
+with dill, colorama and rich, zipped into .taichi/taichi_trim.zip (36 MB, under the 64 MiB that travel),
+is unzipped there into a folder on PYTHONPATH:
+
+    unzip -q .taichi/taichi_trim.zip -d /tmp/taichi && PYTHONPATH=/tmp/taichi:/tmp/site:. \\
+        python3 benchmarks/peer_taichi_gpu.py --counts 65536,262144,1000000,8000000 --out $OUT/peer_taichi_gpu.json
+"""
+import argparse
+import json
+import platform
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmarks.peer_taichi_cpu import run_taichi, sphcore_revision  # noqa: E402
+from benchmarks.steps_per_second import ints, make_case, time_case, versions  # noqa: E402
+
+
+def plot(record, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = record["rows"]
+    n = [r["n"] for r in rows]
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
+    ax.loglog(n, [r["sphcore_vulkan"]["particle_steps_per_second"] for r in rows], "o-", label="sphcore (Vulkan)")
+    ax.loglog(n, [r["taichi_cuda"]["particle_steps_per_second"] for r in rows], "s-", label="Taichi (CUDA)")
+    ax.set(xlabel="particles", ylabel="particle-steps per second", title=f"3D dam-break step, {record['device']}")
+    ax.legend()
+    bx.semilogx(n, [r["ratio_sphcore_over_taichi"] for r in rows], "o-", color="k")
+    bx.axhline(3.0, ls=":", color="gray", label="issue 15's target (3x)")
+    bx.axhline(1.0, ls="--", color="gray")
+    bx.set(xlabel="particles", ylabel="sphcore / Taichi", title="ratio, measured side by side", ylim=(0, None))
+    bx.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    print(f"wrote {path}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--counts", type=ints, default=[65536, 262144, 1000000, 8000000])
+    ap.add_argument("--min-seconds", type=float, default=3.0)
+    ap.add_argument("--steps-per-submit", type=int, default=64)
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/peer_taichi_gpu.json"))
+    ap.add_argument("--plot", type=Path, help="only draw the PNG of this JSON")
+    args = ap.parse_args()
+    if args.plot:
+        return plot(json.loads(args.plot.read_text()), args.plot.with_suffix(".png"))
+    try:
+        import taichi as ti
+    except ImportError:
+        sys.exit("taichi is not importable: pip install taichi (or unzip .taichi/taichi_trim.zip, see --help)")
+
+    record = {"benchmark": "peer_taichi_gpu", "device": None, "versions": versions() | {
+                  "taichi": ".".join(map(str, ti.__version__)), "platform": platform.platform()},
+              "sphcore_git": sphcore_revision(), "steps_per_submit": args.steps_per_submit,
+              "min_seconds": args.min_seconds, "scene": make_case(args.counts[0], 3, "grid")[0].config, "rows": []}
+    print(f"{'N':>9} {'sphcore p-steps/s':>18} {'Taichi p-steps/s':>17} {'ratio':>6}", flush=True)
+    for n in args.counts:
+        device, mine = time_case("vulkan", n, 3, "grid", 128, args.steps_per_submit, args.steps_per_submit,
+                                 args.min_seconds)
+        scene, x0 = make_case(n, 3, "grid")
+        theirs = run_taichi(ti, scene, x0, 0, args.min_seconds, arch=ti.cuda)
+        ratio = mine["particle_steps_per_second"] / theirs["particle_steps_per_second"]
+        record["device"] = device
+        record["rows"].append({"n": n, "sphcore_vulkan": mine, "taichi_cuda": theirs, "ratio_sphcore_over_taichi": ratio})
+        print(f"{n:>9} {mine['particle_steps_per_second']:>18.4g} {theirs['particle_steps_per_second']:>17.4g} "
+              f"{ratio:>6.2f}  ({device}; finite: {mine['finite']}, {theirs['finite']})", flush=True)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
+    try:
+        plot(record, args.out.with_suffix(".png"))
+    except ImportError:
+        print(f"no matplotlib here: draw the PNG with --plot {args.out}")
+
+
+if __name__ == "__main__":
+    main()
