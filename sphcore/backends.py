@@ -76,15 +76,13 @@ BUFFERS = {
     "dfsph_partial": (REAL, 1, "particles"),
     "dfsph_neighbours": (np.uint32, 1, "neighbours"),
     "dfsph_neighbour_count": (np.uint32, 1, "particles"),
-    "dfsph_gradient": (REAL, 4, "neighbours"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
 # particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
 # dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
-# dfsph_neighbours, dfsph_neighbour_count, dfsph_gradient: each particle's neighbour list for the solves'
-# sweeps (j | image << 29 and -V grad_i W_ij of each pair), written by dfsph_factor (spec.MAX_NEIGHBOURS
-# slots a particle: "neighbours" is n times that, at least 1);
+# dfsph_neighbours, dfsph_neighbour_count: each particle's neighbour list for the solves' sweeps, written by
+# dfsph_factor (spec.MAX_NEIGHBOURS slots a particle: "neighbours" is n times that, at least 1 word);
 # dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
@@ -123,15 +121,14 @@ STAGES = {
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "cell_pyramid", "cell_start",
                                                  "obstacle_box", "particle_alpha", "dfsph_control",
-                                                 "particle_kappa", "dfsph_neighbours", "dfsph_neighbour_count",
-                                                 "dfsph_gradient")),
-    "dfsph_residual": (dfsph_residual, "particles", ("particle_v", "particle_a", "particle_rho", "time_state",
-                                                     "particle_residual", "dfsph_partial", "dfsph_neighbours",
-                                                     "dfsph_neighbour_count", "dfsph_gradient")),
-    "dfsph_velocity": (dfsph_velocity, "particles", ("particle_v", "particle_a", "particle_rho", "particle_p",
-                                                     "time_state", "particle_alpha", "particle_residual",
-                                                     "dfsph_control", "particle_kappa", "dfsph_neighbours",
-                                                     "dfsph_neighbour_count", "dfsph_gradient")),
+                                                 "particle_kappa", "dfsph_neighbours", "dfsph_neighbour_count")),
+    "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
+                                                     "obstacle_box", "time_state", "particle_residual",
+                                                     "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count")),
+    "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
+                                                     "particle_p", "obstacle_box", "time_state", "particle_alpha",
+                                                     "particle_residual", "dfsph_control", "particle_kappa",
+                                                     "dfsph_neighbours", "dfsph_neighbour_count")),
     "dfsph_check": (dfsph_check, "one", ("time_state", "dfsph_control", "dfsph_state", "dfsph_history",
                                          "dfsph_partial")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",

@@ -29,7 +29,6 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) writeonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) writeonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) writeonly buffer DfsphGradient { real4 dfsph_gradient[]; };
 
 void main() {
     // [1] one invocation per particle; invocation 0 also starts the step's solves
@@ -58,7 +57,7 @@ void main() {
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [3] sums over every other particle and every image within h of g = V grad_i W_ij = -coef
     //     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; each
-    //     of them into the list, with its g r_hat, in the scan's order (dfsph.glsl)
+    //     of them into the list, in the scan's order (dfsph.glsl)
     real coef = real(P.pressure_coef) / real(P.rest_density);
     real3 sum_grad = real3(0.0);
     real sum_grad2 = real(0.0);
@@ -91,11 +90,7 @@ void main() {
                 real g = coef * kernel_gradient(r2, rlen);
                 sum_grad -= g * r_hat;
                 sum_grad2 += g * g;
-                if (count < MAX_NEIGHBOURS) {
-                    uint e = count * P.n + i;  // the list's entry
-                    dfsph_neighbours[e] = j | (image << IMAGE_SHIFT);
-                    dfsph_gradient[e] = real4(g * r_hat, 0.0);
-                }
+                if (count < MAX_NEIGHBOURS) dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT);
                 count += 1u;
             }
         }

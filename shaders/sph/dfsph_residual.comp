@@ -17,8 +17,15 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "real.glsl"
+#include "cells.glsl"
+#include "kernels.glsl"
+#include "pairs.glsl"
 #include "dfsph.glsl"
 
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+#include "obstacles.glsl"
+
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
@@ -27,7 +34,6 @@ layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_r
 layout(std430, binding = 28) writeonly buffer DfsphPartial { real dfsph_partial[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) readonly buffer DfsphGradient { real4 dfsph_gradient[]; };
 
 shared real s_residual[gl_WorkGroupSize.x];
 
@@ -42,35 +48,49 @@ void main() {
         // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
         real dt = real(time_state[0].x);
         real kick = solve == SOLVE_DENSITY ? dt : real(0.0);
+        real3 xi = particle_x[i].xyz;
         real3 vi = particle_v[i].xyz + kick * particle_a[i].xyz;
-        // [3] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
+        // [3] the walls and obstacle faces the images are mirrored across, as in compute_density
+        real3 wall;
+        uint mirrored = near_walls(xi, wall);
+        real3 inward;
+        mirrored = near_obstacles(xi, mirrored, wall, inward);
+        // [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
+        real coef = real(P.pressure_coef) / real(P.rest_density);
         real d = real(0.0);
         uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
         for (uint slot = 0u; slot < count; ++slot) {
-            // [4] the neighbour j, or its image across the walls whose bits are set in `image`, and
-            //     g r_hat = -V grad_i W_ij (dfsph_factor)
-            uint e = slot * P.n + i;  // the list's entry
-            uint pair = dfsph_neighbours[e];
+            // [5] the neighbour j, or its image across the walls whose bits are set in `image`
+            uint pair = dfsph_neighbours[slot * P.n + i];
             uint j = pair & NEIGHBOUR_MASK;
             uint image = pair >> IMAGE_SHIFT;
-            real3 grad = dfsph_gradient[e].xyz;
-            // [5] the neighbour's (image's) velocity, mirrored on the flipped axes
+            bool fx = (image & 1u) != 0u;
+            bool fy = (image & 2u) != 0u;
+            bool fz = (image & 4u) != 0u;
+            real3 xk = reflected(particle_x[j].xyz, wall, image);
+            real3 r = xi - xk;
+            real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+            real rlen = sqrt(r2);
+            // [6] direction from the neighbour to i (pairs.glsl)
+            real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
+            // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
             real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
-            real vk_x = (image & 1u) != 0u ? -vj.x : vj.x;
-            real vk_y = (image & 2u) != 0u ? -vj.y : vj.y;
-            real vk_z = (image & 4u) != 0u ? -vj.z : vj.z;
-            // [6] V (v_i - v_k) . grad_i W_ik = -(v_i - v_k) . g r_hat
-            d -= (vi.x - vk_x) * grad.x + (vi.y - vk_y) * grad.y + (vi.z - vk_z) * grad.z;
+            real vk_x = fx ? -vj.x : vj.x;
+            real vk_y = fy ? -vj.y : vj.y;
+            real vk_z = fz ? -vj.z : vj.z;
+            real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+            // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+            d -= coef * kernel_gradient(r2, rlen) * v_r;
         }
-        // [7] the residual: compression only
+        // [9] the residual: compression only
         residual = max(d, real(0.0));
         if (solve == SOLVE_DENSITY) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
-        // [8] store
+        // [10] store
         particle_residual[i] = residual;
     }
     s_residual[lid] = residual;
     barrier();
-    // [9] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+    // [11] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
     if (lid != 0u) return;
     real total = real(0.0);
     for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_residual[k];

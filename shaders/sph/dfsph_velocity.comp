@@ -2,9 +2,9 @@
 // One Jacobi update of DFSPH's solve P.level (dfsph.glsl), one invocation per particle: with the
 // stiffness s_j = alpha_j r_j (divergence-free, [1/s]) or alpha_j r_j / dt^2 (constant density, [1/s^2])
 // of every particle from the last dfsph_residual, the change -sum_j V (s_i + s_j) grad W_ij over the
-// neighbour list (dfsph_factor: the neighbours and their wall and obstacle images, with -V grad_i W_ij;
-// an image carries its particle's s) is added to the velocity (divergence-free) or to the acceleration
-// the step integrates (constant density, which also
+// neighbour list (dfsph_factor: the neighbours and their wall and obstacle images; an image carries its
+// particle's s) is added to the
+// velocity (divergence-free) or to the acceleration the step integrates (constant density, which also
 // accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's m p_i / rho_i^2 = V s_i).
 // Every invocation reads only the residuals and writes only its own particle: a Jacobi sweep.
 // Dispatched indirectly: no work groups once the solve has stopped; invocation 0 counts the update.
@@ -14,8 +14,15 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "real.glsl"
+#include "cells.glsl"
+#include "kernels.glsl"
+#include "pairs.glsl"
 #include "dfsph.glsl"
 
+layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
+#include "obstacles.glsl"
+
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
@@ -27,7 +34,6 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) readonly buffer DfsphGradient { real4 dfsph_gradient[]; };
 
 void main() {
     // [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
@@ -43,20 +49,34 @@ void main() {
     real scale = solve == SOLVE_DIVERGENCE ? real(1.0) : real(1.0) / (dt * dt);
     real si = scale * particle_alpha[i] * particle_residual[i];
     if (warm) si = particle_residual[i] > real(0.0) ? particle_kappa[i] : real(0.0);
-    // [3] the change over the neighbour list (dfsph_factor): every other particle and every image within h
+    real3 xi = particle_x[i].xyz;
+    // [3] the walls and obstacle faces the images are mirrored across, as in compute_density
+    real3 wall;
+    uint mirrored = near_walls(xi, wall);
+    real3 inward;
+    mirrored = near_obstacles(xi, mirrored, wall, inward);
+    // [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
+    real coef = real(P.pressure_coef) / real(P.rest_density);
     real3 change = real3(0.0);
     uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
     for (uint slot = 0u; slot < count; ++slot) {
-        // [4] the neighbour j (an image carries its particle's s), and g r_hat = -V grad_i W_ij (dfsph_factor)
-        uint e = slot * P.n + i;  // the list's entry
-        uint j = dfsph_neighbours[e] & NEIGHBOUR_MASK;
-        real3 grad = dfsph_gradient[e].xyz;
-        // [5] -V (s_i + s_j) grad_i W_ij = (s_i + s_j) g r_hat: away from a compressed neighbourhood
+        // [5] the neighbour j, or its image across the walls whose bits are set in `image`
+        uint pair = dfsph_neighbours[slot * P.n + i];
+        uint j = pair & NEIGHBOUR_MASK;
+        uint image = pair >> IMAGE_SHIFT;
+        real3 xk = reflected(particle_x[j].xyz, wall, image);
+        real3 r = xi - xk;
+        real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+        real rlen = sqrt(r2);
+        // [6] direction from the neighbour to i (pairs.glsl)
+        real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
+        // [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+        //     compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];
         if (warm) sj = particle_residual[j] > real(0.0) ? particle_kappa[j] : real(0.0);
-        change += (si + sj) * grad;
+        change += (coef * kernel_gradient(r2, rlen) * (si + sj)) * r_hat;
     }
-    // [6] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+    // [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
     //     (constant density; only the warm start reads the sum of others, and it writes none)
     if (solve == SOLVE_DIVERGENCE) {
         particle_v[i] = real4(particle_v[i].xyz + change, 0.0);

@@ -32,7 +32,7 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
-                          particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradient):
+                          particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
         if i >= P.n:
@@ -59,7 +59,7 @@ def dfsph_factor(spec, real=np.float32):
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [3] sums over every other particle and every image within h of g = V grad_i W_ij = -coef
         #     kernel_gradient r_hat (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; each
-        #     of them into the list, with its g r_hat, in the scan's order (dfsph.py)
+        #     of them into the list, in the scan's order (dfsph.py)
         coef = real(P.pressure_coef) / real(P.rest_density)
         sum_grad_x = real(0.0)
         sum_grad_y = real(0.0)
@@ -104,12 +104,7 @@ def dfsph_factor(spec, real=np.float32):
                     sum_grad_z -= g * r_hat_z
                     sum_grad2 += g * g
                     if count < MAX_NEIGHBOURS:
-                        e = count * P.n + i  # the list's entry
-                        dfsph_neighbours[e] = j | (image << IMAGE_SHIFT)
-                        dfsph_gradient[e, 0] = g * r_hat_x
-                        dfsph_gradient[e, 1] = g * r_hat_y
-                        dfsph_gradient[e, 2] = g * r_hat_z
-                        dfsph_gradient[e, 3] = real(0.0)
+                        dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT)
                     count += 1
         # [6] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
         s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
@@ -129,11 +124,11 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_p, cell_pyramid, cell_start, obstacle_box,
-               particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradient):
+               particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count):
         for group in prange(n_groups):
             for lid in range(local_size):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, cell_pyramid,
                                   cell_start, obstacle_box, particle_alpha, dfsph_control, particle_kappa,
-                                  dfsph_neighbours, dfsph_neighbour_count, dfsph_gradient)
+                                  dfsph_neighbours, dfsph_neighbour_count)
 
     return cached(launch)

@@ -1,7 +1,7 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
-rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve
-r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a;
-each work group's residuals summed in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
+rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve r_i = max(d_i, 0), constant-density
+solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a; each work group's residuals summed
+in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
 
 Mirror of shaders/sph/dfsph_residual.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here. The shader's barrier splits it into two phases, so
@@ -15,16 +15,24 @@ import numpy as np
 from numba import njit, prange
 
 from sphcore.numba_cache import cached
+from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY
+from sphcore.sph.kernels import kernels
+from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 
 
 @lru_cache(maxsize=None)
 def dfsph_residual(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
 
     @njit
-    def dfsph_residual_main(i, params, particle_v, particle_a, particle_rho, time_state, particle_residual,
-                            dfsph_neighbours, dfsph_neighbour_count, dfsph_gradient):
+    def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
+                            particle_residual, dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
         #     invocation of the group reaches the barrier, with a residual of 0 past the last particle
@@ -35,56 +43,71 @@ def dfsph_residual(spec, real=np.float32):
         # [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
         dt = real(time_state[0, 0])
         kick = dt if solve == SOLVE_DENSITY else real(0.0)
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
         vi_x = particle_v[i, 0] + kick * particle_a[i, 0]
         vi_y = particle_v[i, 1] + kick * particle_a[i, 1]
         vi_z = particle_v[i, 2] + kick * particle_a[i, 2]
-        # [3] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
+        # [3] the walls and obstacle faces the images are mirrored across, as in compute_density
+        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        # [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
+        coef = real(P.pressure_coef) / real(P.rest_density)
         d = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
-            # [4] the neighbour j, or its image across the walls whose bits are set in `image`, and
-            #     g r_hat = -V grad_i W_ij (dfsph_factor)
-            e = slot * P.n + i  # the list's entry
-            pair = int(dfsph_neighbours[e])
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`
+            pair = int(dfsph_neighbours[slot * P.n + i])
             j = pair & NEIGHBOUR_MASK
             image = pair >> IMAGE_SHIFT
-            grad_x = dfsph_gradient[e, 0]
-            grad_y = dfsph_gradient[e, 1]
-            grad_z = dfsph_gradient[e, 2]
-            # [5] the neighbour's (image's) velocity, mirrored on the flipped axes
+            fx = (image & 1) != 0
+            fy = (image & 2) != 0
+            fz = (image & 4) != 0
+            xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2], wall_x, wall_y, wall_z, image)
+            r_x = xi_x - xk
+            r_y = xi_y - yk
+            r_z = xi_z - zk
+            r2 = r_x * r_x + r_y * r_y + r_z * r_z
+            rlen = np.sqrt(r2)
+            # [6] direction from the neighbour to i (pairs.glsl)
+            r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
+            # [7] the neighbour's (image's) velocity, mirrored on the flipped axes
             vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
             vj_y = particle_v[j, 1] + kick * particle_a[j, 1]
             vj_z = particle_v[j, 2] + kick * particle_a[j, 2]
-            vk_x = -vj_x if (image & 1) != 0 else vj_x
-            vk_y = -vj_y if (image & 2) != 0 else vj_y
-            vk_z = -vj_z if (image & 4) != 0 else vj_z
-            # [6] V (v_i - v_k) . grad_i W_ik = -(v_i - v_k) . g r_hat
-            d -= (vi_x - vk_x) * grad_x + (vi_y - vk_y) * grad_y + (vi_z - vk_z) * grad_z
-        # [7] the residual: compression only
+            vk_x = -vj_x if fx else vj_x
+            vk_y = -vj_y if fy else vj_y
+            vk_z = -vj_z if fz else vj_z
+            v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
+            # [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+            d -= coef * kernel_gradient(P, r2, rlen) * v_r
+        # [9] the residual: compression only
         residual = max(d, real(0.0))
         if solve == SOLVE_DENSITY:
             residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0))
-        # [8] store
+        # [10] store
         particle_residual[i] = residual
         return residual
 
     @njit
     def dfsph_residual_partial(group, local_size, dfsph_partial, s_residual):
-        # [9] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+        # [11] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
         total = real(0.0)
         for k in range(local_size):
             total += s_residual[k]
         dfsph_partial[group] = total
 
     @njit(parallel=True, error_model="numpy")
-    def launch(n_groups, local_size, params, particle_v, particle_a, particle_rho, time_state, particle_residual,
-               dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradient):
+    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
+               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count):
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
-                s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_v, particle_a,
-                                                      particle_rho, time_state, particle_residual, dfsph_neighbours,
-                                                      dfsph_neighbour_count, dfsph_gradient)
+                s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
+                                                      particle_a, particle_rho, obstacle_box, time_state,
+                                                      particle_residual, dfsph_neighbours, dfsph_neighbour_count)
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
 

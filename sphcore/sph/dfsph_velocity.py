@@ -1,7 +1,7 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
--sum_j V (s_i + s_j) grad W_ij over its neighbour list (dfsph_factor), s_j = alpha_j r_j (divergence-free)
-or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
-with the pressure accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
+-sum_j V (s_i + s_j) grad W_ij over its neighbour list (dfsph_factor), s_j = alpha_j r_j (divergence-free) or alpha_j r_j / dt^2 (constant
+density), added to the velocity (divergence-free) or to the acceleration, with the pressure
+accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
 (dfsph_check); invocation 0 counts the update.
 
 Mirror of shaders/sph/dfsph_velocity.comp: same names, same statement order, same step labels.
@@ -12,18 +12,26 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.dfsph import CONTROL_ITERATIONS, NEIGHBOUR_MASK, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.cells import cells
+from sphcore.sph.dfsph import CONTROL_ITERATIONS, IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.kernels import kernels
+from sphcore.sph.obstacles import obstacles
+from sphcore.sph.pairs import pairs
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
 def dfsph_velocity(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
+    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_obstacles, solid = obstacles(spec, real)
+    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    pair_direction = pairs(real)
 
     @njit
-    def dfsph_velocity_main(i, params, particle_v, particle_a, particle_rho, particle_p, time_state, particle_alpha,
-                            particle_residual, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
-                            dfsph_gradient):
+    def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
+                            time_state, particle_alpha, particle_residual, dfsph_control, particle_kappa,
+                            dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
         #     invocation 0 counts the update
@@ -40,26 +48,42 @@ def dfsph_velocity(spec, real=np.float32):
         si = scale * particle_alpha[i] * particle_residual[i]
         if warm:
             si = particle_kappa[i] if particle_residual[i] > real(0.0) else real(0.0)
-        # [3] the change over the neighbour list (dfsph_factor): every other particle and every image within h
+        xi_x = particle_x[i, 0]
+        xi_y = particle_x[i, 1]
+        xi_z = particle_x[i, 2]
+        # [3] the walls and obstacle faces the images are mirrored across, as in compute_density
+        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
+            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        # [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
+        coef = real(P.pressure_coef) / real(P.rest_density)
         change_x = real(0.0)
         change_y = real(0.0)
         change_z = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
-            # [4] the neighbour j (an image carries its particle's s), and g r_hat = -V grad_i W_ij (dfsph_factor)
-            e = slot * P.n + i  # the list's entry
-            j = int(dfsph_neighbours[e]) & NEIGHBOUR_MASK
-            grad_x = dfsph_gradient[e, 0]
-            grad_y = dfsph_gradient[e, 1]
-            grad_z = dfsph_gradient[e, 2]
-            # [5] -V (s_i + s_j) grad_i W_ij = (s_i + s_j) g r_hat: away from a compressed neighbourhood
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`
+            pair = int(dfsph_neighbours[slot * P.n + i])
+            j = pair & NEIGHBOUR_MASK
+            image = pair >> IMAGE_SHIFT
+            xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2], wall_x, wall_y, wall_z, image)
+            r_x = xi_x - xk
+            r_y = xi_y - yk
+            r_z = xi_z - zk
+            r2 = r_x * r_x + r_y * r_y + r_z * r_z
+            rlen = np.sqrt(r2)
+            # [6] direction from the neighbour to i (pairs.glsl)
+            r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
+            # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+            #     compressed neighbourhood
             sj = scale * particle_alpha[j] * particle_residual[j]
             if warm:
                 sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
-            change_x += (si + sj) * grad_x
-            change_y += (si + sj) * grad_y
-            change_z += (si + sj) * grad_z
-        # [6] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+            t = coef * kernel_gradient(P, r2, rlen) * (si + sj)
+            change_x += t * r_hat_x
+            change_y += t * r_hat_y
+            change_z += t * r_hat_z
+        # [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
         #     (constant density; only the warm start reads the sum of others, and it writes none)
         if solve == SOLVE_DIVERGENCE:
             particle_v[i, 0] = particle_v[i, 0] + change_x
