@@ -272,9 +272,10 @@ def plot(rows, summary, path):
     for ax in axes[-1]:
         ax.set_xlabel("t [s]", fontsize=7)
     s = summary["settings"]
-    fig.suptitle(f"SPHERIC test 2: {summary['particles']} particles (dx = {s['spacing']:g} m), Tait, c = "
-                 f"{math.sqrt(s['stiffness']):g} m/s, {s['precision']}, {s['backend']} on {summary['device']}, "
-                 f"{summary['wall_s']:.0f} s", fontsize=9)
+    model = (f"Tait, c = {math.sqrt(s['stiffness']):g} m/s" if summary.get("configuration", {}).get(
+        "physics.pressure_solver") != "dfsph" else "DFSPH")
+    fig.suptitle(f"SPHERIC test 2: {summary['particles']} particles (dx = {s['spacing']:g} m), {model}, "
+                 f"{s['precision']}, {s['backend']} on {summary['device']}, {summary['wall_s']:.0f} s", fontsize=9)
     fig.tight_layout()
     atomic_savefig(fig, path)
     plt.close(fig)
