@@ -43,7 +43,8 @@ from sphcore.workgroups import group_count
 REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
 PRECISIONS = ("float32", "float64")
 
-# binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | "neighbours" | count)
+# binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | "neighbours"
+# (DFSPH's list slots) | count)
 BUFFERS = {
     "particle_x": (REAL, 4, "particles"),
     "particle_v": (REAL, 4, "particles"),

@@ -67,14 +67,16 @@ class SolverLog:
             self.reported = failures
 
     def overflow(self, backend, step, last):
-        scene = self.scene
+        """Raise SimulationError for a neighbour list overflow first seen at `step` (the steps up to `last`
+        ran): name the slots, and the particle with the longest list now."""
         count = backend.read_buffer("dfsph_neighbour_count")
         k = int(np.argmax(count))
+        particle = int(backend.read_buffer("particle_id")[k])
         raise SimulationError(
             f"step {step}: a particle had more neighbours and wall images within h than its neighbour list's "
-            f"{scene.max_neighbours} slots (fluid.max_neighbours); at step {last} particle "
-            f"{int(backend.read_buffer('particle_id')[k])} has {int(count[k])}. The solves would lose pairs, so the run "
-            "stops here: raise fluid.max_neighbours, or look for particles crowding together (a blow-up)")
+            f"{self.scene.max_neighbours} slots (fluid.max_neighbours); at step {last} particle {particle} has "
+            f"{int(count[k])}. The solves would lose pairs, so the run stops here: raise fluid.max_neighbours, or "
+            "look for particles crowding together (a blow-up)")
 
     def warn(self, control, state, failures, last):
         scene = self.scene

@@ -108,7 +108,8 @@ def work(scene, position):
     from sphcore.backends import BUFFERS, STAGES, buffer_dtype, buffer_length, plan
 
     params = scene.params(len(position))
-    sizes = {name: buffer_length(length, params, scene.spec.MAX_NEIGHBOURS) * c * buffer_dtype(name, scene["physics.precision"]).itemsize
+    slots, precision = scene.spec.MAX_NEIGHBOURS, scene["physics.precision"]
+    sizes = {name: buffer_length(length, params, slots) * c * buffer_dtype(name, precision).itemsize
              for name, (_, c, length) in BUFFERS.items()}
     return stage_bytes(plan(scene), {name: entry[2] for name, entry in STAGES.items()}, sizes), pair_tests(scene, position)
 

@@ -14,7 +14,7 @@
 // neighbours and their wall and obstacle images within h, in the scan's order, as j | image << IMAGE_SHIFT
 // in dfsph_neighbours[slot * n + i] (slot < MAX_NEIGHBOURS: consecutive invocations read consecutive
 // words), their number in dfsph_neighbour_count[i]. Every sweep of the solves walks that list: the sums
-// run in the scan's order, with the same terms, over a fifth (2D) or a seventh (3D) of the candidates.
+// run in the scan's order, with the same terms, over about a third (2D) or a seventh (3D) of the candidates.
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
 // (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level
 // (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order

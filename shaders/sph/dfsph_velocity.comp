@@ -3,9 +3,9 @@
 // stiffness s_j = alpha_j r_j (divergence-free, [1/s]) or alpha_j r_j / dt^2 (constant density, [1/s^2])
 // of every particle from the last dfsph_residual, the change -sum_j V (s_i + s_j) grad W_ij over the
 // neighbour list (dfsph_factor: the neighbours and their wall and obstacle images; an image carries its
-// particle's s) is added to the
-// velocity (divergence-free) or to the acceleration the step integrates (constant density, which also
-// accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's m p_i / rho_i^2 = V s_i).
+// particle's s) is added to the velocity (divergence-free) or to the acceleration the step integrates
+// (constant density, which also accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's
+// m p_i / rho_i^2 = V s_i).
 // Every invocation reads only the residuals and writes only its own particle: a Jacobi sweep.
 // Dispatched indirectly: no work groups once the solve has stopped; invocation 0 counts the update.
 // Mirror: sphcore/sph/dfsph_velocity.py (same names, same statement order, same step labels).

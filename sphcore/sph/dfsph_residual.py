@@ -1,7 +1,7 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
-rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve r_i = max(d_i, 0), constant-density
-solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a; each work group's residuals summed
-in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
+rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve
+r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a;
+each work group's residuals summed in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
 
 Mirror of shaders/sph/dfsph_residual.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here. The shader's barrier splits it into two phases, so

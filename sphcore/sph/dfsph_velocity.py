@@ -1,7 +1,7 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
--sum_j V (s_i + s_j) grad W_ij over its neighbour list (dfsph_factor), s_j = alpha_j r_j (divergence-free) or alpha_j r_j / dt^2 (constant
-density), added to the velocity (divergence-free) or to the acceleration, with the pressure
-accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
+-sum_j V (s_i + s_j) grad W_ij over its neighbour list (dfsph_factor), s_j = alpha_j r_j (divergence-free)
+or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
+with the pressure accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
 (dfsph_check); invocation 0 counts the update.
 
 Mirror of shaders/sph/dfsph_velocity.comp: same names, same statement order, same step labels.
