@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from sphcore.profile import Profile
+from sphcore.scene import Scene
 from sphcore.simulation import Simulation
 from sphcore.validate.dam_break import dam_break_scene
 
@@ -34,6 +35,8 @@ def main():
     ap.add_argument("--per-submit", type=int, default=10)
     ap.add_argument("--dt-from", help="folder of benchmarks/dfsph_gpu.sh's JSONs (each solver's mean dt)")
     ap.add_argument("--profile", action="store_true", help="also a per-stage profile of each solver")
+    ap.add_argument("--max-iterations", type=int, help="DFSPH's fluid.max_iterations (default: the scene's, 100): "
+                    "each recorded iteration that finds its solve stopped is still three empty dispatches")
     ap.add_argument("--out")
     args = ap.parse_args()
     rows = []
@@ -41,6 +44,10 @@ def main():
         for solver, config in SOLVERS.items():
             scene = dam_break_scene({"dimension": 3, "resolution": r, "depth": r, "config": config,
                                      "kernel": args.kernel, "backend": args.backend})
+            if args.max_iterations and solver == "dfsph":
+                data = json.loads(scene.to_json())
+                data["fluid"]["max_iterations"] = args.max_iterations
+                scene = Scene.from_dict(data)
             profile = Profile() if args.profile else None
             with Simulation(scene, args.backend, **({"profile": profile} if profile else {})) as sim:
                 sim.backend.profile = None  # the timed steps: no timestamps
@@ -51,7 +58,10 @@ def main():
                     sim.advance(args.per_submit)
                 sim.backend.read_buffer("time_state")  # (waits for the device)
                 seconds = (time.perf_counter() - start) / (args.steps // args.per_submit * args.per_submit)
+                log = sim.solver_log.array() if solver == "dfsph" else None
                 row = {"resolution": r, "particles": sim.n, "solver": solver, "ms_per_step": 1e3 * seconds,
+                       "max_iterations": scene["fluid.max_iterations"] if solver == "dfsph" else None,
+                       "unconverged_steps": int((log[:, 7] == 0).sum()) if log is not None else None,
                        "device": getattr(getattr(sim.backend, "ctx", None), "device_name", "cpu (numba)")}
                 if profile:
                     sim.backend.profile = profile
