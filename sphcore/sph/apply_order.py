@@ -27,14 +27,17 @@ def apply_order(spec, real=np.float32):
         if k >= P.n:
             return
         # [2] copy back
-        particle_x[k, :] = scratch_x[k, :]
-        particle_v[k, :] = scratch_v[k, :]
+        for c in range(4):  # (a vec4)
+            particle_x[k, c] = scratch_x[k, c]
+        for c in range(4):  # (a vec4)
+            particle_v[k, c] = scratch_v[k, c]
         particle_id[k] = scratch_id[k]
         if CONTINUITY:
             particle_rho[k] = scratch_rho[k]
         # [3] Verlet's half-step velocity, back from its scratch (gather_particles.comp)
         if VERLET:
-            particle_vh[k, :] = particle_a[k, :]
+            for c in range(4):  # (a vec4)
+                particle_vh[k, c] = particle_a[k, c]
         # [4] DFSPH's warm start, back from its scratch (gather_particles.comp)
         if DFSPH:
             particle_kappa[k] = scratch_rho[k]

@@ -27,15 +27,18 @@ def gather_particles(spec, real=np.float32):
             return
         # [2] fetch the particle that goes there
         j = sorted_index[k]
-        scratch_x[k, :] = particle_x[j, :]
-        scratch_v[k, :] = particle_v[j, :]
+        for c in range(4):  # (a vec4)
+            scratch_x[k, c] = particle_x[j, c]
+        for c in range(4):  # (a vec4)
+            scratch_v[k, c] = particle_v[j, c]
         scratch_id[k] = particle_id[j]
         if CONTINUITY:
             scratch_rho[k] = particle_rho[j]
         # [3] Verlet's half-step velocity (integrators.glsl) travels too, with particle_a as its scratch:
         #     nothing reads the acceleration before compute_forces rewrites it
         if VERLET:
-            particle_a[k, :] = particle_vh[j, :]
+            for c in range(4):  # (a vec4)
+                particle_a[k, c] = particle_vh[j, c]
         # [4] DFSPH's warm start (dfsph.glsl) travels too, with scratch_rho as its scratch (no continuity density)
         if DFSPH:
             scratch_rho[k] = particle_kappa[j]
