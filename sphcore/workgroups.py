@@ -17,7 +17,9 @@ constants (numba compiles them in, so a disabled term costs nothing), cached per
 `real`, the float type of the shader build (np.float32, or np.float64: shaders/sph/real.glsl).
 
 A launch keeps its compiled code on disk across runs, one entry per set of closure constants
-(sphcore/numba_cache.py); a stage that writes its own launch returns `cached(launch)`.
+(sphcore/numba_cache.py); a stage that writes its own launch returns `cached(launch)`, which also
+compiles its body and helpers without reference counting: a body must not allocate (no array
+slices: copy a vec4 component by component), only the launch may (a work group's shared memory).
 """
 from numba import njit, prange
 
