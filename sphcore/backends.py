@@ -14,10 +14,8 @@ buffers and of the arithmetic on them: Vulkan builds the shaders with SPHCORE_FL
 """
 import time
 from collections import namedtuple
-from functools import lru_cache
 
 import numpy as np
-from numba import njit
 
 from sphcore.params import MAX_OBSTACLES, SHADER_DIR, pyramid_levels
 from sphcore.sph.apply_order import apply_order
@@ -40,7 +38,6 @@ from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.scatter_particles import scatter_particles
 from sphcore.sph.sort_cells import sort_cells
-from sphcore.numba_cache import cached
 from sphcore.workgroups import group_count
 
 REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
@@ -296,15 +293,6 @@ def stage_params(params, stage):
     return p
 
 
-@lru_cache(maxsize=None)
-def _compiled_steps(source, launches):
-    """The jitted loop over steps of NumbaBackend._stepper's `source` over `launches`: one per plan, shared
-    by every backend that runs it (a second one compiles and loads nothing)."""
-    namespace = {"__name__": __name__}  # (an importable module: a cached entry rebuilds its globals from it)
-    exec(compile(source, "<sphcore.backends.NumbaBackend._stepper>", "exec"), namespace)
-    return cached(njit(namespace["make"](*launches)), helpers_without_nrt=False)
-
-
 class NumbaBackend:
     """The shaders' numba mirrors on the CPU: work groups in parallel, invocations in order.
     `state` is converted to `precision` (a copy: the caller's arrays are never written)."""
@@ -320,7 +308,6 @@ class NumbaBackend:
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
         self._launch = [(STAGES[s.name][0](spec, self.real), self._groups(s), stage_params(params, s),
                          [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
-        self._steps = None  # the compiled loop over steps (_stepper), made on the first step()
 
     def _groups(self, stage):
         """A stage's work groups, or for an indirect one the index in dfsph_control to read them from
@@ -346,40 +333,9 @@ class NumbaBackend:
         launch(self._launch_groups(self._groups(stage)), self.local_size, stage_params(self.params, stage),
                *(self.state[k] for k in STAGES[stage.name][2]))
 
-    def _stepper(self):
-        """One compiled function running `count` steps of the plan: the launches in order, with no
-        Python between them (a small scene's step is otherwise bound by its calls into numba from
-        Python, each unboxing its arrays). It is written out as source, each launch a closure constant
-        (so the numba cache tells plans apart, sphcore/numba_cache.py), and called with the plan's work
-        groups, buffers and parameter blocks. None for a DFSPH plan: its hundreds of indirect launches
-        stay in the Python loop, which skips those with no work groups."""
-        if any(stage.indirect for stage in self.stages):
-            return None
-        blocks = []  # the distinct parameter blocks (reduce_cells' levels differ)
-        for _, _, params, _ in self._launch:
-            if not any(params.tobytes() == b.tobytes() for b in blocks):
-                blocks.append(params)
-        names = sorted({name for stage in self.stages for name in STAGES[stage.name][2]})
-        lines = [f"def make({', '.join(f'launch{k}' for k in range(len(self._launch)))}):",
-                 f"    def steps(count, local_size, groups, {', '.join(f'params{b}' for b in range(len(blocks)))}, "
-                 f"{', '.join(names)}):",
-                 "        for _ in range(count):"]
-        for k, (stage, (_, _, params, _)) in enumerate(zip(self.stages, self._launch)):
-            block = next(b for b, other in enumerate(blocks) if other.tobytes() == params.tobytes())
-            lines.append(f"            launch{k}(groups[{k}], local_size, params{block}, "
-                         f"{', '.join(STAGES[stage.name][2])})  # {stage.name}")
-        lines.append("    return steps")
-        steps = _compiled_steps("\n".join(lines), tuple(launch for launch, _, _, _ in self._launch))
-        arguments = [tuple(groups for _, groups, _, _ in self._launch), *blocks, *(self.state[name] for name in names)]
-        return lambda count: steps(count, self.local_size, *arguments)
-
     def step(self, count=1):
         if self.profile is not None:
             return self._profiled_step(count)
-        if self._steps is None:
-            self._steps = self._stepper() or False
-        if self._steps:
-            return self._steps(count)
         for _ in range(count):
             for launch, groups, params, buffers in self._launch:
                 n_groups = self._launch_groups(groups)

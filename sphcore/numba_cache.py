@@ -46,14 +46,11 @@ from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLoca
 from sphcore.paths import PACKAGE_DIR, cache_dir
 
 
-def cached(launch, helpers_without_nrt=True):
+def cached(launch):
     """`launch` (a numba dispatcher) with its compiled code kept on disk across runs, its jitted helpers
-    (the shader body `main` and what it calls) compiled without reference counting (`without_nrt`),
-    unless `helpers_without_nrt` is False (sphcore.backends' loop over steps, whose helpers are the
-    launches: they keep it)."""
-    if helpers_without_nrt:
-        for cell in launch.py_func.__closure__ or ():
-            without_nrt(cell.cell_contents)
+    (the shader body `main` and what it calls) compiled without reference counting (`without_nrt`)."""
+    for cell in launch.py_func.__closure__ or ():
+        without_nrt(cell.cell_contents)
     _name_by_content(launch)
     try:
         launch._cache = MirrorCache(launch)

@@ -36,7 +36,7 @@ def probe(names=tuple(CASES)):
         state = empty_state(params, precision)
         state["particle_x"][:, :dim] = x
         backend = make_backend("numba", params, state, [Stage("compute_density")], scene.spec, precision=precision)
-        backend.run_stage(Stage("compute_density"))  # (the launch itself: step() runs a compiled loop)
+        backend.step()
         stats = STAGES["compute_density"][0](scene.spec, backend.real).stats
         out[name] = {"rho": backend.read_buffer("particle_rho").tolist(), "x": x.tolist(),
                      "h": float(params[0]["h"]), "h2": float(params[0]["h2"]),
@@ -95,7 +95,7 @@ def probe_cells(dims):
         state = empty_state(params)
         state["particle_x"][:, :dim] = x
         backend = make_backend("numba", params, state, [Stage("count_cells")], scene.spec)
-        backend.run_stage(Stage("count_cells"))  # (the launch itself: step() runs a compiled loop)
+        backend.step()
         out[str(dim)] = {"cell": backend.read_buffer("particle_cell").tolist(), "x": x.tolist(),
                          "inv_cell": float(params[0]["inv_cell"]), "grid_dim": params[0]["grid_dim"].tolist()}
     return out
