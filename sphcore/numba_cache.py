@@ -86,9 +86,8 @@ def without_nrt(func):
     (its private `_nrt` option; set before the first compile). With it every call of a function that takes
     arrays increments and decrements their counts atomically: about 30 ns a call, more than the whole
     body of a cheap stage (count_cells at 65,536 particles: 10.8 ms with it, 0.26 ms without). The
-    mirrors' bodies and helpers only
-    read and write the arrays they are given; the launches, which allocate a work group's shared memory,
-    keep it."""
+    mirrors' bodies and helpers only read and write the arrays they are given; the launches, which
+    allocate a work group's shared memory, keep it."""
     if not hasattr(func, "py_func") or func.targetoptions.get("_nrt") is False:
         return
     func.targetoptions["_nrt"] = False
