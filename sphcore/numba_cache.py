@@ -81,23 +81,18 @@ def fingerprint(func):
     return digest.hexdigest()
 
 
-def without_nrt(func, inline=False):
-    """Compile jitted `func`, and each jitted function in its closure (its helpers, which are also
-    inlined into it at numba's IR level), without numba's reference counting (its private `_nrt`
-    option; both options are set before the first compile). With it every call of a function that takes
+def without_nrt(func):
+    """Compile jitted `func`, and each jitted function in its closure, without numba's reference counting
+    (its private `_nrt` option; set before the first compile). With it every call of a function that takes
     arrays increments and decrements their counts atomically: about 30 ns a call, more than the whole
     body of a cheap stage (count_cells at 65,536 particles: 10.8 ms with it, 0.26 ms without). The
     mirrors' bodies and helpers only read and write the arrays they are given; the launches, which
-    allocate a work group's shared memory, keep it. Inlining the helpers (kernel_w, reflected, ...)
-    into the pair loops took the 3D grid step at 65,536 particles from 42.9 to 36.3 ms; the body itself
-    is not inlined into its launch (numba cannot inline a call with *args)."""
+    allocate a work group's shared memory, keep it."""
     if not hasattr(func, "py_func") or func.targetoptions.get("_nrt") is False:
         return
     func.targetoptions["_nrt"] = False
-    if inline:
-        func.targetoptions["inline"] = "always"
     for cell in func.py_func.__closure__ or ():
-        without_nrt(cell.cell_contents, inline=True)
+        without_nrt(cell.cell_contents)
 
 
 def _name_by_content(func):
