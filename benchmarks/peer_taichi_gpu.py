@@ -12,7 +12,14 @@ matplotlib).
 
 The GPU machine has no Taichi: its cp312 wheel without taichi/_lib/c_api (unused by the Python API),
 with dill, colorama and rich, zipped into .taichi/taichi_trim.zip (36 MB, under the 64 MiB that travel),
-is unzipped there into a folder on PYTHONPATH:
+is unzipped there into a folder on PYTHONPATH. The zip is made here (it is not committed):
+
+    pip download taichi==1.7.4 dill colorama rich --python-version 3.12 --only-binary=:all: --no-deps \
+        --platform manylinux_2_27_x86_64 --platform any -d /tmp/tw
+    mkdir /tmp/tw/site && cd /tmp/tw/site && for w in ../*.whl; do unzip -q $w; done
+    rm -r taichi/_lib/c_api && zip -q -r -9 $REPO/.taichi/taichi_trim.zip .
+
+and there:
 
     unzip -q .taichi/taichi_trim.zip -d /tmp/taichi && PYTHONPATH=/tmp/taichi:/tmp/site:. \\
         python3 benchmarks/peer_taichi_gpu.py --counts 65536,262144,1000000,8000000 --out $OUT/peer_taichi_gpu.json
