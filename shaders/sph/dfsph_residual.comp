@@ -34,6 +34,7 @@ layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_r
 layout(std430, binding = 28) writeonly buffer DfsphPartial { real dfsph_partial[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+#include "neighbour_list.glsl"
 
 shared real s_residual[gl_WorkGroupSize.x];
 
@@ -60,37 +61,34 @@ void main() {
         real d = real(0.0);
         uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
         for (uint slot = 0u; slot < count; ++slot) {
-            // [5] the neighbour j, or its image across the walls whose bits are set in `image`
-            uint pair = dfsph_neighbours[slot * P.n + i];
-            uint j = pair & NEIGHBOUR_MASK;
-            uint image = pair >> IMAGE_SHIFT;
+            // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
+            //     direction from it to i (neighbour_list.glsl)
+            uint j;
+            uint image;
+            real r2;
+            real rlen;
+            real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r2, rlen);
             bool fx = (image & 1u) != 0u;
             bool fy = (image & 2u) != 0u;
             bool fz = (image & 4u) != 0u;
-            real3 xk = reflected(particle_x[j].xyz, wall, image);
-            real3 r = xi - xk;
-            real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-            real rlen = sqrt(r2);
-            // [6] direction from the neighbour to i (pairs.glsl)
-            real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-            // [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+            // [6] the neighbour's (image's) velocity, mirrored on the flipped axes
             real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
             real vk_x = fx ? -vj.x : vj.x;
             real vk_y = fy ? -vj.y : vj.y;
             real vk_z = fz ? -vj.z : vj.z;
             real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
-            // [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+            // [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
             d -= coef * kernel_gradient(r2, rlen) * v_r;
         }
-        // [9] the residual: compression only
+        // [8] the residual: compression only
         residual = max(d, real(0.0));
         if (solve == SOLVE_DENSITY) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
-        // [10] store
+        // [9] store
         particle_residual[i] = residual;
     }
     s_residual[lid] = residual;
     barrier();
-    // [11] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+    // [10] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
     if (lid != 0u) return;
     real total = real(0.0);
     for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_residual[k];

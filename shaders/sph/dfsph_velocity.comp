@@ -34,6 +34,7 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+#include "neighbour_list.glsl"
 
 void main() {
     // [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
@@ -60,23 +61,20 @@ void main() {
     real3 change = real3(0.0);
     uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
     for (uint slot = 0u; slot < count; ++slot) {
-        // [5] the neighbour j, or its image across the walls whose bits are set in `image`
-        uint pair = dfsph_neighbours[slot * P.n + i];
-        uint j = pair & NEIGHBOUR_MASK;
-        uint image = pair >> IMAGE_SHIFT;
-        real3 xk = reflected(particle_x[j].xyz, wall, image);
-        real3 r = xi - xk;
-        real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-        real rlen = sqrt(r2);
-        // [6] direction from the neighbour to i (pairs.glsl)
-        real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-        // [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+        // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
+        //     direction from it to i (neighbour_list.glsl)
+        uint j;
+        uint image;
+        real r2;
+        real rlen;
+        real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r2, rlen);
+        // [6] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
         //     compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];
         if (warm) sj = particle_residual[j] > real(0.0) ? particle_kappa[j] : real(0.0);
         change += (coef * kernel_gradient(r2, rlen) * (si + sj)) * r_hat;
     }
-    // [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+    // [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
     //     (constant density; only the warm start reads the sum of others, and it writes none)
     if (solve == SOLVE_DIVERGENCE) {
         particle_v[i] = real4(particle_v[i].xyz + change, 0.0);

@@ -16,10 +16,10 @@ from numba import njit, prange
 
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY
+from sphcore.sph.dfsph import SOLVE_DENSITY
 from sphcore.sph.kernels import kernels
+from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
-from sphcore.sph.pairs import pairs
 
 
 @lru_cache(maxsize=None)
@@ -28,7 +28,7 @@ def dfsph_residual(spec, real=np.float32):
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
-    pair_direction = pairs(real)
+    listed_pair = neighbour_list(spec, real)
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
@@ -58,22 +58,15 @@ def dfsph_residual(spec, real=np.float32):
         d = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
-            # [5] the neighbour j, or its image across the walls whose bits are set in `image`
-            pair = int(dfsph_neighbours[slot * P.n + i])
-            j = pair & NEIGHBOUR_MASK
-            image = pair >> IMAGE_SHIFT
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
+            #     direction from it to i (neighbour_list.glsl)
+            j, image, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+                P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
+                inward_z)
             fx = (image & 1) != 0
             fy = (image & 2) != 0
             fz = (image & 4) != 0
-            xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2], wall_x, wall_y, wall_z, image)
-            r_x = xi_x - xk
-            r_y = xi_y - yk
-            r_z = xi_z - zk
-            r2 = r_x * r_x + r_y * r_y + r_z * r_z
-            rlen = np.sqrt(r2)
-            # [6] direction from the neighbour to i (pairs.glsl)
-            r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
-            # [7] the neighbour's (image's) velocity, mirrored on the flipped axes
+            # [6] the neighbour's (image's) velocity, mirrored on the flipped axes
             vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
             vj_y = particle_v[j, 1] + kick * particle_a[j, 1]
             vj_z = particle_v[j, 2] + kick * particle_a[j, 2]
@@ -81,19 +74,19 @@ def dfsph_residual(spec, real=np.float32):
             vk_y = -vj_y if fy else vj_y
             vk_z = -vj_z if fz else vj_z
             v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
-            # [8] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
+            # [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
             d -= coef * kernel_gradient(P, r2, rlen) * v_r
-        # [9] the residual: compression only
+        # [8] the residual: compression only
         residual = max(d, real(0.0))
         if solve == SOLVE_DENSITY:
             residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0))
-        # [10] store
+        # [9] store
         particle_residual[i] = residual
         return residual
 
     @njit
     def dfsph_residual_partial(group, local_size, dfsph_partial, s_residual):
-        # [11] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+        # [10] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
         total = real(0.0)
         for k in range(local_size):
             total += s_residual[k]

@@ -13,10 +13,10 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import CONTROL_ITERATIONS, IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DIVERGENCE, SOLVE_WARM_START
+from sphcore.sph.dfsph import CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
 from sphcore.sph.kernels import kernels
+from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
-from sphcore.sph.pairs import pairs
 from sphcore.workgroups import launcher
 
 
@@ -26,7 +26,7 @@ def dfsph_velocity(spec, real=np.float32):
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
-    pair_direction = pairs(real)
+    listed_pair = neighbour_list(spec, real)
 
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
@@ -62,19 +62,12 @@ def dfsph_velocity(spec, real=np.float32):
         change_z = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
-            # [5] the neighbour j, or its image across the walls whose bits are set in `image`
-            pair = int(dfsph_neighbours[slot * P.n + i])
-            j = pair & NEIGHBOUR_MASK
-            image = pair >> IMAGE_SHIFT
-            xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2], wall_x, wall_y, wall_z, image)
-            r_x = xi_x - xk
-            r_y = xi_y - yk
-            r_z = xi_z - zk
-            r2 = r_x * r_x + r_y * r_y + r_z * r_z
-            rlen = np.sqrt(r2)
-            # [6] direction from the neighbour to i (pairs.glsl)
-            r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
-            # [7] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
+            #     direction from it to i (neighbour_list.glsl)
+            j, image, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+                P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
+                inward_z)
+            # [6] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
             #     compressed neighbourhood
             sj = scale * particle_alpha[j] * particle_residual[j]
             if warm:
@@ -83,7 +76,7 @@ def dfsph_velocity(spec, real=np.float32):
             change_x += t * r_hat_x
             change_y += t * r_hat_y
             change_z += t * r_hat_z
-        # [8] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+        # [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
         #     (constant density; only the warm start reads the sum of others, and it writes none)
         if solve == SOLVE_DIVERGENCE:
             particle_v[i, 0] = particle_v[i, 0] + change_x
