@@ -104,28 +104,9 @@ def run_taichi(ti, scene, x0, threads, min_seconds, arch=None):
         c = ti.cast(ti.floor((q - ti.Vector(lo)) * inv_cell), ti.i32)
         return ti.max(ti.min(c, ti.Vector(gd) - 1), 0)
 
-    @ti.kernel
-    def sort_by_cell():
-        # counting sort: count per cell, exclusive prefix sum (serial, ~26k cells), scatter
-        for c in count:
-            count[c] = 0
-        for i in x:
-            c = cell_of(x[i])
-            cell[i] = (c.z * gd[1] + c.y) * gd[0] + c.x
-            slot[i] = ti.atomic_add(count[cell[i]], 1)
-        total = 0
-        ti.loop_config(serialize=True)
-        for c in range(ncell):
-            start[c] = total
-            total += count[c]
-        for i in x:
-            d = start[cell[i]] + slot[i]
-            xs[d] = x[i]
-            vs[d] = v[i]
-
+    # counting sort: count per cell, inclusive prefix sum of the counts, scatter
     @ti.kernel
     def bin_particles():
-        # GPU: the counting sort's count; its inclusive prefix sum is PrefixSumExecutor's (on `start`)
         for c in count:
             count[c] = 0
         for i in x:
@@ -136,6 +117,14 @@ def run_taichi(ti, scene, x0, threads, min_seconds, arch=None):
             start[c] = count[c]
 
     @ti.kernel
+    def serial_prefix_sum():  # the CPU's: one thread (~26k cells)
+        total = 0
+        ti.loop_config(serialize=True)
+        for c in range(ncell):
+            total += start[c]
+            start[c] = total
+
+    @ti.kernel
     def scatter_particles():
         for c in start:  # inclusive -> exclusive
             start[c] -= count[c]
@@ -144,13 +133,12 @@ def run_taichi(ti, scene, x0, threads, min_seconds, arch=None):
             xs[d] = x[i]
             vs[d] = v[i]
 
-    if gpu:
-        scan = ti.algorithms.PrefixSumExecutor(ncell)
+    prefix_sum = ti.algorithms.PrefixSumExecutor(ncell).run if gpu else lambda _: serial_prefix_sum()
 
-        def sort_by_cell():  # noqa: F811 (the GPU's sort)
-            bin_particles()
-            scan.run(start)
-            scatter_particles()
+    def sort_by_cell():
+        bin_particles()
+        prefix_sum(start)
+        scatter_particles()
 
     @ti.kernel
     def compute_density():
