@@ -109,7 +109,7 @@ void main() {
                 real vk_z = fz ? -vj.z : vj.z;
                 real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
                 // [7] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
-                sum_div += kernel_gradient(r2, rlen) * v_r;
+                sum_div += pair_gradient(r2, rlen, image) * v_r;
                 // [8] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
                 //     image carries its particle's density, so its hydrostatic difference is its particle's
                 if (DENSITY_DIFFUSION > 0u) sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);

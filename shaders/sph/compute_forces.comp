@@ -72,7 +72,7 @@ void main() {
                 real rhoj = particle_rho[j];
                 real pj = particle_p[j];
                 real rlen = sqrt(r2);
-                real grad = kernel_gradient(r2, rlen);  // kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
+                real grad = pair_gradient(r2, rlen, image);  // kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
                 // [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
                 //     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                 //     along its inward normal; two particles are pushed apart along x,

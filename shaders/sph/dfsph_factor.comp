@@ -87,7 +87,7 @@ void main() {
                 real rlen = sqrt(r2);
                 // [5] direction from the neighbour to i (pairs.glsl)
                 real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-                real g = coef * kernel_gradient(r2, rlen);
+                real g = coef * pair_gradient(r2, rlen, image);
                 sum_grad -= g * r_hat;
                 sum_grad2 += g * g;
                 if (count < MAX_NEIGHBOURS) dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT);

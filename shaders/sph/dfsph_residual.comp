@@ -78,7 +78,7 @@ void main() {
             real vk_z = fz ? -vj.z : vj.z;
             real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
             // [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-            d -= coef * kernel_gradient(r2, rlen) * v_r;
+            d -= coef * pair_gradient(r2, rlen, image) * v_r;
         }
         // [8] the residual: compression only
         residual = max(d, real(0.0));

@@ -72,7 +72,7 @@ void main() {
         //     compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];
         if (warm) sj = particle_residual[j] > real(0.0) ? particle_kappa[j] : real(0.0);
-        change += (coef * kernel_gradient(r2, rlen) * (si + sj)) * r_hat;
+        change += (coef * pair_gradient(r2, rlen, image) * (si + sj)) * r_hat;
     }
     // [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
     //     (constant density; only the warm start reads the sum of others, and it writes none)

@@ -39,7 +39,7 @@ def compute_density(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
-    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
     hydrostatic_density, diffusion_term = density_diffusion(spec, real)
     equation_of_state_ = equation_of_state(spec, real)
@@ -129,7 +129,7 @@ def compute_density(spec, real=np.float32):
                     vk_z = -vj_z if fz else vj_z
                     v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
                     # [7] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
-                    sum_div += kernel_gradient(P, r2, rlen) * v_r
+                    sum_div += pair_gradient(P, r2, rlen, image) * v_r
                     # [8] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
                     #     image carries its particle's density, so its hydrostatic difference is its particle's
                     if DENSITY_DIFFUSION > 0:

@@ -32,7 +32,7 @@ def compute_forces(spec, real=np.float32):
     OBSTACLES = spec.OBSTACLES
     image_velocity = walls(spec, real)[2]
     viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
-    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
 
     @njit
@@ -98,7 +98,7 @@ def compute_forces(spec, real=np.float32):
                     rhoj = particle_rho[j]
                     pj = particle_p[j]
                     rlen = np.sqrt(r2)
-                    grad = kernel_gradient(P, r2, rlen)  # kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
+                    grad = pair_gradient(P, r2, rlen, image)  # kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
                     # [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
                     #     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                     #     along its inward normal; two particles are pushed apart along x,

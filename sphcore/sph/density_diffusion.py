@@ -16,7 +16,7 @@ from sphcore.sph.kernels import kernels
 @lru_cache(maxsize=None)
 def density_diffusion(spec, real=np.float32):
     DENSITY_DIFFUSION = spec.DENSITY_DIFFUSION
-    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
 
     @njit
     def hydrostatic_density(P, x_ji_x, x_ji_y, x_ji_z):

@@ -27,7 +27,7 @@ def dfsph_factor(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
-    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
 
     @njit
@@ -98,7 +98,7 @@ def dfsph_factor(spec, real=np.float32):
                     # [5] direction from the neighbour to i (pairs.glsl)
                     r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
                                                                       inward_y, inward_z)
-                    g = coef * kernel_gradient(P, r2, rlen)
+                    g = coef * pair_gradient(P, r2, rlen, image)
                     sum_grad_x -= g * r_hat_x
                     sum_grad_y -= g * r_hat_y
                     sum_grad_z -= g * r_hat_z

@@ -27,7 +27,7 @@ def dfsph_residual(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
-    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     listed_pair = neighbour_list(spec, real)
 
     @njit
@@ -75,7 +75,7 @@ def dfsph_residual(spec, real=np.float32):
             vk_z = -vj_z if fz else vj_z
             v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
             # [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-            d -= coef * kernel_gradient(P, r2, rlen) * v_r
+            d -= coef * pair_gradient(P, r2, rlen, image) * v_r
         # [8] the residual: compression only
         residual = max(d, real(0.0))
         if solve == SOLVE_DENSITY:

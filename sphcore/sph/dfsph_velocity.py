@@ -25,7 +25,7 @@ def dfsph_velocity(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
-    kernel_w, kernel_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     listed_pair = neighbour_list(spec, real)
 
     @njit
@@ -72,7 +72,7 @@ def dfsph_velocity(spec, real=np.float32):
             sj = scale * particle_alpha[j] * particle_residual[j]
             if warm:
                 sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
-            t = coef * kernel_gradient(P, r2, rlen) * (si + sj)
+            t = coef * pair_gradient(P, r2, rlen, image) * (si + sj)
             change_x += t * r_hat_x
             change_y += t * r_hat_y
             change_z += t * r_hat_z

@@ -42,10 +42,19 @@ def kernels(spec, real=np.float32):
         return hr * hr
 
     @njit
+    def pair_gradient(P, r2, rlen, image):
+        """The pair loops' gradient for particle i and neighbour j or its mirror image (image != 0):
+        Wendland C2's magnitude is held at its peak (q = 1/4) below h/4 for an image, so that a wall
+        keeps pushing a particle that comes close to it (kernels.glsl says why)."""
+        if KERNEL == 1 and image != 0:
+            rlen = max(rlen, real(0.25) * P.h)
+        return kernel_gradient(P, r2, rlen)
+
+    @njit
     def kernel_laplacian(P, r2, rlen):
         """The laminar viscosity's kernel (shape, > 0): mu m L_ij = P.viscosity_coef * kernel_laplacian."""
         if KERNEL == 1:
             return kernel_gradient(P, r2, rlen) * rlen / (r2 + real(0.01) * P.h2)
         return P.h - rlen
 
-    return kernel_w, kernel_gradient, kernel_laplacian
+    return kernel_w, kernel_gradient, pair_gradient, kernel_laplacian
