@@ -152,6 +152,23 @@ def test_tiny_buchner_run_on_numba(tmp_path):
     assert summary["rms_points"] > 10 and math.isfinite(summary["rms_p_star"])
     assert set(summary["meets"]) == {"peak_time", "peak_height", "rms"}
     assert (out / "dam_break_pressure.png").stat().st_size > 10_000
+    # the peers' series (validation/data) beside ours, measured the same way
+    assert sorted(summary["peers"]) == sorted(f"{peer} {res}" for peer in buchner.PEERS for res in ("H/40", "H/80", "H/320"))
+    for label, peer in summary["peers"].items():
+        assert peer["rms_points"] > 50 and 0.0 < peer["rms_p_star"] < 1.0, label
+
+
+def test_peer_metrics_are_ours_applied_to_their_series():
+    """Each peer's RMS is errors()' RMS of its own columns: a peer series replaced by the measured one
+    scores zero, and one shifted by 0.1 scores 0.1."""
+    t_exp, p_exp, _ = buchner.read_measured()
+    assert buchner.errors(t_exp, p_exp)["rms_p_star"] == pytest.approx(0.0, abs=1e-12)
+    assert buchner.errors(t_exp, p_exp + 0.1)["rms_p_star"] == pytest.approx(0.1, rel=1e-9)
+    series = buchner.read_peers()
+    for label, metrics in buchner.peer_errors().items():
+        t, p = series[label]
+        assert np.all(np.diff(t) > 0) and t[0] < 2.45 and t[-1] > 6.5, label  # the impact and the plateau covered
+        assert metrics["rms_p_star"] == pytest.approx(buchner.errors(t, p)["rms_p_star"], rel=1e-12)
 
 
 def test_report_shows_each_configurations_figures(tmp_path):

@@ -23,6 +23,11 @@ Metrics (issue 12's targets):
 The same of the running mean over SMOOTH_STAR (a transducer's area and the digitisation both
 smooth) are given beside them, not in place of them.
 
+Peers (PEERS; the summary's "peers", the plot's thin lines): the same metrics of TrixiParticles'
+own WCSPH results at this sensor and of Marrone et al. 2011's delta-SPH curves, at H/40, H/80 and
+H/320. TrixiParticles' reach RMS 0.27-0.32 and rise as slowly after the impact as ours; Marrone's
+0.16-0.19.
+
 Model: linear equation of state at c = 20 sqrt(g H) (48.5 m/s, as TrixiParticles; 10 times the
 fastest flow, 2 sqrt(g H)), h = 2 dx, viscosity alpha = 0.02 (as Monaghan's alpha, or Mueller's
 mu = alpha rho_0 c h / (2 dim + 4) in the laminar model), the rest from the named configuration
@@ -55,6 +60,11 @@ RMS_UNTIL = 7.0  # t*
 SMOOTH_STAR = 0.1  # t*: the running mean reported beside the raw samples
 TARGETS = {"peak_time": 0.05, "peak_height": 0.20, "rms": 0.1}  # issue 12
 
+# Peers on the same case and sensor, digitised or taken from their own reference results (each file's
+# header names its source): {label: (file, {column label: column})}. Their metrics are computed as ours.
+PEERS = {"TrixiParticles WCSPH": ("buchner2002_P1_trixiparticles_wcsph.csv", {"H/40": 1, "H/80": 2, "H/320": 3}),
+         "Marrone et al. 2011 delta-SPH": ("buchner2002_P1_marrone2011_trixi.csv", {"H/40": 1, "H/80": 2, "H/320": 3})}
+
 SETTINGS = {  # what `sphcore validate dam-break-pressure` runs
     "resolution": 40,  # particles per H
     "H": 0.6,  # m
@@ -78,6 +88,23 @@ def read_measured():
     header = path.open(encoding="utf-8").readline().lstrip("# ").strip()
     data = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
     return data[:, 0], data[:, 1], header
+
+
+def read_peers():
+    """{"<peer> <resolution>": (t*, p*)} of PEERS."""
+    out = {}
+    for peer, (name, columns) in PEERS.items():
+        data = np.loadtxt(DATA_DIR / name, delimiter=",", comments="#", ndmin=2)
+        for label, column in columns.items():
+            out[f"{peer} {label}"] = (data[:, 0], data[:, column])
+    return out
+
+
+def peer_errors():
+    """{"<peer> <resolution>": the metrics of errors()} of each peer series against the measured one."""
+    return {label: {k: v for k, v in errors(t, p).items() if k not in ("targets", "peak_t_star_measured",
+                                                                       "peak_p_star_measured")}
+            for label, (t, p) in read_peers().items()}
 
 
 def buchner_scene(settings=None):
@@ -221,7 +248,8 @@ def run_buchner(settings=None, out_dir=None, progress=True):
     rows, info = sample_run(scene, s["backend"], s["t_end_star"] / scale, SAMPLE_DT_STAR / scale, sample,
                             progress, f"dam break pressure [{s['backend']}]", s.get("device"))
     summary = {"settings": s, "configuration": configs.overrides(s), **info, "dt": dt_estimate(scene), "h": scene.h,
-               "sensor": sensor, **errors([r["t_star"] for r in rows], [r["p_star"] for r in rows])}
+               "sensor": sensor, **errors([r["t_star"] for r in rows], [r["p_star"] for r in rows]),
+               "peers": peer_errors()}
     if out_dir is not None:
         write_results(rows, summary, out_dir)
     if info["error"]:
@@ -278,6 +306,12 @@ def plot(rows, summary, path):
     ax.plot(t, p, color="0.6", lw=0.6, label="sphcore, each sample")
     if len(t) > 1:
         ax.plot(t, running_mean(t, p), "k-", lw=1.2, label=f"sphcore, running mean over {SMOOTH_STAR:g}")
+    peers = summary.get("peers") or {}
+    for (label, (tp, pp)), color in zip(read_peers().items(), ("tab:blue", "tab:cyan", "tab:purple", "tab:green",
+                                                                 "tab:olive", "tab:orange")):
+        if label.endswith("H/40") or label.endswith("H/320"):  # the coarsest and finest of each peer
+            rms = peers.get(label, {}).get("rms_p_star", math.nan)
+            ax.plot(tp, pp, "-", color=color, lw=0.8, alpha=0.8, label=f"{label} (RMS {rms:.3f})")
     ax.plot(t_exp, p_exp, "o", color="tab:red", ms=3.5, mfc="none", label="Buchner 2002 (P1, as TrixiParticles extracted it)")
     ax.plot([summary["peak_t_star"]], [summary["peak_p_star"]], "kv", ms=7, label="simulated impact peak")
     ax.set(xlabel="t* = t sqrt(g/H)", ylabel="p* = p / (rho g H)", xlim=(0, max(t[-1], 1.0)),
