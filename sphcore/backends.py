@@ -25,9 +25,8 @@ from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
-from sphcore.sph.dfsph import (CONTROL_SIZE, DISPATCH_CHECK, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+from sphcore.sph.dfsph import (CONTROL_SIZE, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
                                SOLVE_WARM_START, dispatch_base)
-from sphcore.sph.dfsph_check import dfsph_check
 from sphcore.sph.dfsph_factor import dfsph_factor
 from sphcore.sph.dfsph_residual import dfsph_residual
 from sphcore.sph.dfsph_velocity import dfsph_velocity
@@ -125,13 +124,12 @@ STAGES = {
                                                  "particle_kappa", "dfsph_neighbours", "dfsph_neighbour_count")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "obstacle_box", "time_state", "particle_residual",
-                                                     "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count")),
+                                                     "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count",
+                                                     "dfsph_control", "dfsph_state", "dfsph_history")),
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "obstacle_box", "time_state", "particle_alpha",
                                                      "particle_residual", "dfsph_control", "particle_kappa",
                                                      "dfsph_neighbours", "dfsph_neighbour_count")),
-    "dfsph_check": (dfsph_check, "one", ("time_state", "dfsph_control", "dfsph_state", "dfsph_history",
-                                         "dfsph_partial")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
                                            "time_state")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
@@ -175,16 +173,17 @@ def plan(scene):
 
 
 def dfsph_solve(solve, iterations):
-    """One DFSPH solve as recorded: the residual and its check, then `iterations` times an update, the
-    residual and the check, dispatched indirectly. Once a check stops the solve, it zeroes their group
-    counts: the loop ends on the device, with no readback, and both backends run the same updates."""
-    return ([Stage("dfsph_residual", solve), Stage("dfsph_check", solve)]
-            + [Stage(name, solve, True) for name in ("dfsph_velocity", "dfsph_residual", "dfsph_check")] * iterations)
+    """One DFSPH solve as recorded: the residual (whose last work group runs the convergence check), then
+    `iterations` times an update and the residual, dispatched indirectly. Once a check stops the solve, it
+    zeroes their group counts: the loop ends on the device, with no readback, and both backends run the
+    same updates."""
+    return [Stage("dfsph_residual", solve)] + [Stage(name, solve, True) for name in ("dfsph_velocity",
+                                                                                  "dfsph_residual")] * iterations
 
 
 def indirect_offset(stage):
     """The index in dfsph_control of an indirect stage's (x, y, z) work group counts (dfsph.glsl)."""
-    return dispatch_base(stage.level) + (DISPATCH_CHECK if STAGES[stage.name][1] == "one" else 0)
+    return dispatch_base(stage.level)
 
 
 def buffer_dtype(name, precision="float32"):

@@ -17,7 +17,8 @@ from sphcore.backends import Stage, empty_state, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation, SimulationError, run
-from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, dispatch_base
+from sphcore.sph.dfsph import (CONTROL_FINISHED, IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+                               dispatch_base)
 from sphcore.workgroups import group_count
 
 # a 2D water column (10 x 10 particles) in a 0.3 m x 0.2 m tank: it starts to collapse
@@ -65,7 +66,9 @@ def test_default_scenes_are_unchanged_and_dfsph_adds_its_solves():
     assert not wcsph.spec.DFSPH and not any(s.name.startswith("dfsph_") for s in plan(wcsph))
     stages = [s.name for s in plan(scene_of(**{"fluid.max_iterations": 5}))]
     assert stages.index("dfsph_factor") < stages.index("compute_forces") < stages.index("choose_dt")
-    assert stages.count("dfsph_check") == 2 * (1 + 5) and stages.count("dfsph_velocity") == 2 * 5 + 1  # + warm start
+    # each solve: a residual, then 5 (update, residual); the warm start adds one of each; no separate check
+    assert stages.count("dfsph_residual") == 2 * (1 + 5) + 1 and stages.count("dfsph_velocity") == 2 * 5 + 1
+    assert "dfsph_check" not in stages
     assert stages[-1] == "integrate"
 
 
@@ -94,9 +97,11 @@ def test_solver_stages_agree_and_count_the_same_iterations():
                 groups = group_count(len(a["particle_x"]), cpu.backend.local_size)
                 for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY):
                     base = dispatch_base(solve)
-                    assert list(a["dfsph_control"][base:base + 7]) == [groups, 1, 1, 0, 1, 1, 1]
+                    assert list(a["dfsph_control"][base:base + 3]) == [groups, 1, 1]
+            # the residual's last work group checks, and leaves the count of finished groups at 0 for the next
+            assert a["dfsph_control"][CONTROL_FINISHED] == b["dfsph_control"][CONTROL_FINISHED] == 0
         for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY):  # both stopped: the rest of the budget dispatched nothing
-            assert a["dfsph_control"][dispatch_base(solve)] == a["dfsph_control"][dispatch_base(solve) + 4] == 0
+            assert a["dfsph_control"][dispatch_base(solve)] == 0
         cpu.step_count = gpu.step_count = 1
         for sim in (cpu, gpu):
             sim.solver_log.collect(sim.backend, 0, 1)

@@ -1,6 +1,6 @@
 // DFSPH, the divergence-free SPH pressure solver (Bender & Koschier 2015, 2017; physics.pressure_solver =
 // "dfsph", specialization constant DFSPH): the layout of its state buffers, shared by dfsph_factor.comp,
-// dfsph_residual.comp, dfsph_velocity.comp and dfsph_check.comp.
+// dfsph_residual.comp (with dfsph_check.glsl) and dfsph_velocity.comp.
 // Mirror: sphcore/sph/dfsph.py (same names, same values).
 //
 // One time step (sphcore.backends.plan; Bender & Koschier 2017, Alg. 2; the order of SPlisHSPlasH's
@@ -8,8 +8,8 @@
 //   [grid sort] compute_density (summation) -> dfsph_factor (alpha_i) -> divergence-free solve (solve 1)
 //   -> compute_forces (no pressure term) -> reduce_dt, choose_dt (CFL on the particle speed)
 //   -> constant-density solve (solve 2) -> integrate (v += dt a, x += dt v).
-// A solve is dfsph_residual, dfsph_check, then max_iterations times [dfsph_velocity, dfsph_residual,
-// dfsph_check], all recorded into the command buffer (no readback). The positions do not move during
+// A solve is dfsph_residual, then max_iterations times [dfsph_velocity, dfsph_residual], all recorded into
+// the command buffer (no readback). The positions do not move during
 // the solves, so dfsph_factor's scan of the grid cells also writes each particle's neighbour list: its
 // neighbours and their wall and obstacle images within h, in the scan's order, as j | image << IMAGE_SHIFT
 // in dfsph_neighbours[slot * n + i] (slot < MAX_NEIGHBOURS: consecutive invocations read consecutive
@@ -19,12 +19,14 @@
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
 // (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level
 // (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order
-// in two levels: each dfsph_residual work group sums its residuals in order (dfsph_partial), and
-// dfsph_check, one work group, sums those. Once the mean is under the tolerance (after the minimum
-// iterations) or the budget is spent, dfsph_check sets the solve's done flag and zeroes its group
-// counts: the solve's later stages are indirect dispatches (vkCmdDispatchIndirect) that read those
-// counts, so the rest of the recorded budget dispatches no work groups. dfsph_factor sets the counts
-// at the start of every step.
+// in two levels: each dfsph_residual work group sums its residuals in order (dfsph_partial), and the
+// last of its work groups to finish (an atomic count, CONTROL_FINISHED) sums those (dfsph_check.glsl).
+// Once the mean is under the tolerance (after the minimum iterations) or the budget is spent, it sets the
+// solve's done flag and zeroes its group counts: the solve's later stages are indirect dispatches
+// (vkCmdDispatchIndirect) that read those counts, so the rest of the recorded budget dispatches no work
+// groups. dfsph_factor sets the counts at the start of every step. The check has no dispatch of its own:
+// an iteration is two dispatches, and a spent one costs two empty dispatches and their barriers (a
+// separate check stage made it three).
 // With V_j = m / rho_0 and V grad_i W_ij = -(pressure_coef / rho_0) kernel_gradient r_hat_ij:
 //   alpha_i = 1 / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2)                     (dfsph_factor)
 //   d_i = sum_j V (v_i - v_j) . grad W_ij, the density ratio's rate                   (dfsph_residual)
@@ -44,7 +46,7 @@ const uint SOLVE_WARM_START = 3u;       // P.level of dfsph_velocity's warm star
 const float WARM_START = 0.5;           // as SPlisHSPlasH: half the last pressure (a full one overshoots where
                                         // the flow decompresses, and the solve only ever adds pressure)
 
-// dfsph_control (uint): set by the host (max iterations), the stages and dfsph_check
+// dfsph_control (uint): set by the host (max iterations), the stages and the check (dfsph_check.glsl)
 const uint CONTROL_DONE = 0u;           // [CONTROL_DONE + solve]: 1 once the solve has stopped this step
 const uint CONTROL_ITERATIONS = 2u;     // [CONTROL_ITERATIONS + solve]: its velocity updates this step
 const uint CONTROL_STEP = 5u;           // steps completed (the device's count: the history's row)
@@ -54,9 +56,10 @@ const uint CONTROL_FAILED_SOLVE = 8u;   //   and its solve
 const uint CONTROL_MAX_ITERATIONS = 9u; // fluid.max_iterations (host)
 const uint CONTROL_OVERFLOW_STEP = 10u; // the first step (1 = the first) at which a particle had more than
                                         // MAX_NEIGHBOURS neighbours and images within h; 0: none
+const uint CONTROL_FINISHED = 11u;      // dfsph_residual's work groups finished so far in this dispatch (the
+                                        // last one runs the check and resets it to 0)
 const uint CONTROL_DISPATCH = 16u;      // [dispatch_base(solve)]: the solve's indirect dispatch arguments,
-const uint DISPATCH_CHECK = 4u;         //   (x, y, z) work groups of its dfsph_velocity and dfsph_residual,
-                                        //   and at + DISPATCH_CHECK those of its dfsph_check
+                                        //   (x, y, z) work groups of its dfsph_velocity and dfsph_residual
 const uint CONTROL_SIZE = 32u;
 
 const uint IMAGE_SHIFT = 29u;           // dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)

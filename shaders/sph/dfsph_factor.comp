@@ -44,9 +44,6 @@ void main() {
             dfsph_control[base] = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
             dfsph_control[base + 1u] = 1u;
             dfsph_control[base + 2u] = 1u;
-            dfsph_control[base + DISPATCH_CHECK] = 1u;
-            dfsph_control[base + DISPATCH_CHECK + 1u] = 1u;
-            dfsph_control[base + DISPATCH_CHECK + 2u] = 1u;
         }
     }
     // [2] own position; wall and obstacle images as in compute_density

@@ -7,9 +7,10 @@
 //   constant-density solve: r_i = max(rho_i / rho_0 + dt d_i - 1, 0), with v* = v + dt a (the velocity
 //   the step would integrate) and this step's dt (time_state, choose_dt.comp).
 // Only compression is corrected (a free surface's density deficit is not a tension). Invocation 0 of
-// each work group sums the group's residuals in order into dfsph_partial, the first level of the mean
-// that dfsph_check.comp reduces. A solve's iterations are dispatched indirectly: no work groups once it
-// has stopped.
+// each work group sums the group's residuals in order into dfsph_partial, and counts the group as
+// finished; the last group to finish runs the solve's convergence test (dfsph_check.glsl) over every
+// group's sum, in the same dispatch. A solve's iterations are dispatched indirectly: no work groups once
+// it has stopped.
 // Mirror: sphcore/sph/dfsph_residual.py (same names, same statement order, same step labels; one
 // local loop per phase between barriers).
 #extension GL_GOOGLE_include_directive : require
@@ -31,12 +32,18 @@ layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_residual[]; };
-layout(std430, binding = 28) writeonly buffer DfsphPartial { real dfsph_partial[]; };
+layout(std430, binding = 24) coherent buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 25) buffer DfsphState { float dfsph_state[]; };
+layout(std430, binding = 26) writeonly buffer DfsphHistory { float dfsph_history[]; };
+layout(std430, binding = 28) coherent buffer DfsphPartial { real dfsph_partial[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 #include "neighbour_list.glsl"
 
 shared real s_residual[gl_WorkGroupSize.x];
+shared bool s_last;
+shared real s_sum[gl_WorkGroupSize.x];
+#include "dfsph_check.glsl"
 
 void main() {
     // [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
@@ -88,9 +95,25 @@ void main() {
     }
     s_residual[lid] = residual;
     barrier();
-    // [10] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+    // [10] invocation 0: the group's residuals in order, its part of the solve's error; made visible, then
+    //      the group counted as finished: the last one to finish (the count's old value one short of the
+    //      groups) runs the check. Which group that is varies; what it computes does not
+    uint groups = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
+    if (lid == 0u) {
+        real total = real(0.0);
+        for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_residual[k];
+        dfsph_partial[gl_WorkGroupID.x] = total;
+        memoryBarrierBuffer();
+        s_last = atomicAdd(dfsph_control[CONTROL_FINISHED], 1u) == groups - 1u;
+        memoryBarrierBuffer();
+    }
+    barrier();
+    // [11] the last group: the convergence test over every group's sum (dfsph_check.glsl), each
+    //      invocation its share, then invocation 0 the error and the stop; the count reset for the next
+    if (!s_last) return;
+    s_sum[lid] = dfsph_check_share(lid, groups);
+    barrier();
     if (lid != 0u) return;
-    real total = real(0.0);
-    for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_residual[k];
-    dfsph_partial[gl_WorkGroupID.x] = total;
+    dfsph_control[CONTROL_FINISHED] = 0u;
+    dfsph_check_decide(solve);
 }

@@ -20,8 +20,9 @@ CONTROL_FAILED_STEP = 7  # the first of them: its step (1 = the first step)
 CONTROL_FAILED_SOLVE = 8  # and its solve
 CONTROL_MAX_ITERATIONS = 9  # fluid.max_iterations (host)
 CONTROL_OVERFLOW_STEP = 10  # the first step at which a particle had more than MAX_NEIGHBOURS; 0: none
+CONTROL_FINISHED = 11  # dfsph_residual's work groups finished in this dispatch (the last runs the check, resets it)
 CONTROL_DISPATCH = 16  # [dispatch_base(solve)]: the solve's indirect dispatch arguments, (x, y, z) work
-DISPATCH_CHECK = 4  # groups of its dfsph_velocity and dfsph_residual, and at + DISPATCH_CHECK of its dfsph_check
+#                        groups of its dfsph_velocity and dfsph_residual
 CONTROL_SIZE = 32
 IMAGE_SHIFT = 29  # dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)
 NEIGHBOUR_MASK = (1 << IMAGE_SHIFT) - 1

@@ -1,25 +1,22 @@
-"""DFSPH's convergence test of solve P.level (dfsph.py), one work group: the mean residual in a fixed
-order (of dfsph_residual's work groups' sums) is the solve's error; under the tolerance after the
-minimum iterations, or with the budget spent, the solve's done flag is set and its indirect dispatches'
-work groups zeroed; an unconverged stop is counted and the first recorded; the constant-density solve's
-stop writes the step's row of dfsph_history.
+"""DFSPH's convergence test of solve P.level (dfsph.py), run by the last of dfsph_residual's work groups
+to finish: the mean residual in a fixed order (of the work groups' sums) is the solve's error; under the
+tolerance after the minimum iterations, or with the budget spent, the solve's done flag is set and its
+indirect dispatches' work groups zeroed; an unconverged stop is counted and the first recorded; the
+constant-density solve's stop writes the step's row of dfsph_history.
 
-Mirror of shaders/sph/dfsph_check.comp: same names, same statement order, same step labels. The
-shader's barrier splits it into two phases, so this mirror is launched by its own `launch`, not by
-sphcore.workgroups.launcher: per work group one local loop over the invocations per phase, with the
-group's shared array as scratch (STYLE.md). Its float32 arithmetic is numpy's, in the shader's order.
+Mirror of shaders/sph/dfsph_check.glsl: same names, same statements. dfsph_residual's launch calls
+dfsph_check_share for each invocation, then dfsph_check_decide, once every work group has run (the
+shader's last group to finish). Its float32 arithmetic is numpy's, in the shader's order.
 """
 from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
-from sphcore.numba_cache import cached
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES,
-                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, DISPATCH_CHECK,
-                               HISTORY_COLUMNS, HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE,
-                               SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE,
-                               dispatch_base)
+                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, HISTORY_ROWS,
+                               MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+                               STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE, dispatch_base)
 
 f32 = np.float32
 
@@ -28,29 +25,26 @@ f32 = np.float32
 def dfsph_check(spec, real=np.float32):
 
     @njit
-    def dfsph_check_share(lid, local_size, params, dfsph_partial, s_sum):
-        P = params[0]
-        # [1] the solve (no work group once it has stopped: its dispatch is indirect); dfsph_residual's groups
-        groups = (int(P.n) + local_size - 1) // local_size
-        # [2] each invocation sums the groups' sums lid, lid + L, lid + 2 L, ... in index order
-        total = real(0.0)
+    def dfsph_check_share(lid, groups, local_size, dfsph_partial):
+        """Invocation lid's share: the sums of groups lid, lid + L, lid + 2 L, ... of `groups`, in index order."""
+        sum = real(0.0)
         for k in range(lid, groups, local_size):
-            total += dfsph_partial[k]
-        s_sum[lid] = total
+            sum += dfsph_partial[k]
+        return sum
 
     @njit
-    def dfsph_check_decide(local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum):
+    def dfsph_check_decide(solve, local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum):
+        """Invocation 0, once every share is in s_sum: the error, and the solve's stop."""
         P = params[0]
-        solve = int(P.level)
-        # [3] invocation 0: the shares in order, their mean: the error (divergence-free: times dt, the last
-        #     step's, or P.dt before the first)
+        # the shares in order, their mean: the error (divergence-free: times dt, the last step's, or P.dt
+        # before the first)
         total = real(0.0)
         for k in range(local_size):
             total += s_sum[k]
         error = f32(total / real(P.n))
         if solve == SOLVE_DIVERGENCE:
             error *= time_state[0, 0] if time_state[0, 0] > f32(0.0) else P.dt
-        # [4] stop: converged after the minimum iterations, or the budget spent
+        # stop: converged after the minimum iterations, or the budget spent
         iterations = dfsph_control[CONTROL_ITERATIONS + solve]
         least = MIN_ITERATIONS_DENSITY if solve == SOLVE_DENSITY else MIN_ITERATIONS_DIVERGENCE
         converged = iterations >= least and error <= dfsph_state[STATE_TOLERANCE + solve]
@@ -58,16 +52,15 @@ def dfsph_check(spec, real=np.float32):
             return
         dfsph_control[CONTROL_DONE + solve] = 1
         dfsph_control[dispatch_base(solve)] = 0
-        dfsph_control[dispatch_base(solve) + DISPATCH_CHECK] = 0
         dfsph_state[STATE_ERROR + solve] = error
-        # [5] a solve that spent its budget unconverged: counted, the first one recorded
+        # a solve that spent its budget unconverged: counted, the first one recorded
         if not converged:
             dfsph_control[CONTROL_FAILURES] += 1
             if dfsph_control[CONTROL_FAILURES] == 1:
                 dfsph_control[CONTROL_FAILED_STEP] = dfsph_control[CONTROL_STEP] + 1
                 dfsph_control[CONTROL_FAILED_SOLVE] = solve
                 dfsph_state[STATE_FAILED_ERROR] = error
-        # [6] the constant-density solve ends the step: its history row, the step count
+        # the constant-density solve ends the step: its history row, the step count
         if solve != SOLVE_DENSITY:
             return
         step = dfsph_control[CONTROL_STEP] + 1
@@ -84,13 +77,4 @@ def dfsph_check(spec, real=np.float32):
         dfsph_history[row, 7] = f32(1.0) if both else f32(0.0)
         dfsph_control[CONTROL_STEP] = step
 
-    @njit(error_model="numpy")
-    def launch(n_groups, local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, dfsph_partial):
-        for group in range(n_groups):
-            s_sum = np.empty(local_size, real)  # the group's shared memory
-            for lid in range(local_size):
-                dfsph_check_share(lid, local_size, params, dfsph_partial, s_sum)
-            # (barrier)
-            dfsph_check_decide(local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum)
-
-    return cached(launch)
+    return dfsph_check_share, dfsph_check_decide

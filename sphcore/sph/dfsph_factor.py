@@ -13,7 +13,7 @@ from numba import njit, prange
 
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, CONTROL_OVERFLOW_STEP, CONTROL_STEP, DISPATCH_CHECK,
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, CONTROL_OVERFLOW_STEP, CONTROL_STEP,
                                IMAGE_SHIFT, SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START, dispatch_base)
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
@@ -47,9 +47,6 @@ def dfsph_factor(spec, real=np.float32):
                 dfsph_control[base] = (P.n + local_size - 1) // local_size
                 dfsph_control[base + 1] = 1
                 dfsph_control[base + 2] = 1
-                dfsph_control[base + DISPATCH_CHECK] = 1
-                dfsph_control[base + DISPATCH_CHECK + 1] = 1
-                dfsph_control[base + DISPATCH_CHECK + 2] = 1
         # [2] own position; wall and obstacle images as in compute_density
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]

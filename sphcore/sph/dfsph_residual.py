@@ -1,13 +1,16 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
 rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve
 r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a;
-each work group's residuals summed in order into dfsph_partial. Dispatched indirectly: no work groups once the solve has stopped.
+each work group's residuals summed in order into dfsph_partial; the last work group to finish runs the
+solve's convergence test (dfsph_check). Dispatched indirectly: no work groups once the solve has stopped.
 
 Mirror of shaders/sph/dfsph_residual.comp: same names, same statement order, same step labels.
-A GLSL vec3 local `v` is `v_x, v_y, v_z` here. The shader's barrier splits it into two phases, so
-`launch` runs, per work group, one local loop over the invocations per phase, with the group's shared
-array as scratch (STYLE.md); the first phase is `dfsph_residual_main`, which returns the invocation's
-residual (the value it leaves in shared memory).
+A GLSL vec3 local `v` is `v_x, v_y, v_z` here. The shader's barriers split it into phases, so `launch`
+runs, per work group, one local loop over the invocations per phase, with the group's shared arrays as
+scratch (STYLE.md); the first phase is `dfsph_residual_main`, which returns the invocation's residual (the
+value it leaves in shared memory). The shader elects the last group to finish by an atomic count; here
+the groups run in a parallel loop, and the last group's phases (the check) run once after it, which is
+where the count puts them. Whichever group the shader elects, it computes the same.
 """
 from functools import lru_cache
 
@@ -17,6 +20,7 @@ from numba import njit, prange
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import SOLVE_DENSITY
+from sphcore.sph.dfsph_check import dfsph_check
 from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
@@ -29,6 +33,7 @@ def dfsph_residual(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     listed_pair = neighbour_list(spec, real)
+    dfsph_check_share, dfsph_check_decide = dfsph_check(spec, real)
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
@@ -86,7 +91,9 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit
     def dfsph_residual_partial(group, local_size, dfsph_partial, s_residual):
-        # [10] invocation 0: the group's residuals in order, its part of the solve's error (dfsph_check)
+        # [10] invocation 0: the group's residuals in order, its part of the solve's error; made visible, then
+        #      the group counted as finished: the last one to finish (the count's old value one short of the
+        #      groups) runs the check. Which group that is varies; what it computes does not
         total = real(0.0)
         for k in range(local_size):
             total += s_residual[k]
@@ -94,7 +101,9 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
-               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count):
+               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_control, dfsph_state,
+               dfsph_history):
+        groups = (int(params[0].n) + local_size - 1) // local_size
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
@@ -103,5 +112,16 @@ def dfsph_residual(spec, real=np.float32):
                                                       particle_residual, dfsph_neighbours, dfsph_neighbour_count)
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
+        if n_groups == 0:
+            return
+        # (barrier)
+        # [11] the last group: the convergence test over every group's sum (dfsph_check.glsl), each
+        #      invocation its share, then invocation 0 the error and the stop; the count reset for the next
+        s_sum = np.empty(local_size, real)  # the last group's shared memory
+        for lid in range(local_size):
+            s_sum[lid] = dfsph_check_share(lid, groups, local_size, dfsph_partial)
+        # (barrier)
+        dfsph_check_decide(int(params[0].level), local_size, params, time_state, dfsph_control, dfsph_state,
+                           dfsph_history, s_sum)
 
     return cached(launch)
