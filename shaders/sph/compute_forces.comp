@@ -64,7 +64,8 @@ void main() {
             }
             for (uint j = start; j < end; ++j) {
                 if (j == i && image == 0u) continue;
-                real3 xk = reflected(particle_x[j].xyz, wall, image);
+                real3 xk = particle_x[j].xyz;
+                if (image != 0u) xk = reflected(xk, wall, image);
                 if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
                 real3 r = xi - xk;
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;

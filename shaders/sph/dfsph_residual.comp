@@ -75,15 +75,13 @@ void main() {
             real r2;
             real rlen;
             real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r2, rlen);
-            bool fx = (image & 1u) != 0u;
-            bool fy = (image & 2u) != 0u;
-            bool fz = (image & 4u) != 0u;
-            // [6] the neighbour's (image's) velocity, mirrored on the flipped axes
-            real3 vj = particle_v[j].xyz + kick * particle_a[j].xyz;
-            real vk_x = fx ? -vj.x : vj.x;
-            real vk_y = fy ? -vj.y : vj.y;
-            real vk_z = fz ? -vj.z : vj.z;
-            real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+            // [6] the neighbour's velocity; an image's mirrored on the flipped axes
+            real3 vk = particle_v[j].xyz + kick * particle_a[j].xyz;
+            if (image != 0u) {
+                vk = real3((image & 1u) != 0u ? -vk.x : vk.x, (image & 2u) != 0u ? -vk.y : vk.y,
+                           (image & 4u) != 0u ? -vk.z : vk.z);
+            }
+            real v_r = (vi.x - vk.x) * r_hat.x + (vi.y - vk.y) * r_hat.y + (vi.z - vk.z) * r_hat.z;
             // [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
             d -= coef * pair_gradient(r2, rlen, image) * v_r;
         }

@@ -11,7 +11,8 @@ real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uin
     uint pair = dfsph_neighbours[slot * P.n + i];
     j = pair & NEIGHBOUR_MASK;
     image = pair >> IMAGE_SHIFT;
-    real3 xk = reflected(particle_x[j].xyz, wall, image);
+    real3 xk = particle_x[j].xyz;
+    if (image != 0u) xk = reflected(xk, wall, image);  // (most entries are particles: no selects for them)
     real3 r = xi - xk;
     r2 = r.x * r.x + r.y * r.y + r.z * r.z;
     rlen = sqrt(r2);

@@ -100,8 +100,9 @@ def compute_density(spec, real=np.float32):
                     start = int(cell_start[first])
                     end = int(cell_start[last]) + int(cell_pyramid[last])
                 for j in range(start, end):
-                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
-                                           wall_x, wall_y, wall_z, image)
+                    xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
+                    if image != 0:
+                        xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
                     if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
                         continue  # (obstacles.glsl)
                     r_x = xi_x - xk

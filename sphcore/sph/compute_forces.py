@@ -85,8 +85,9 @@ def compute_forces(spec, real=np.float32):
                 for j in range(start, end):
                     if j == i and image == 0:
                         continue
-                    xk, yk, zk = reflected(particle_x[j, 0], particle_x[j, 1], particle_x[j, 2],
-                                           wall_x, wall_y, wall_z, image)
+                    xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
+                    if image != 0:
+                        xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
                     if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
                         continue  # (obstacles.glsl)
                     r_x = xi_x - xk

@@ -68,16 +68,14 @@ def dfsph_residual(spec, real=np.float32):
             j, image, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
                 P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
                 inward_z)
-            fx = (image & 1) != 0
-            fy = (image & 2) != 0
-            fz = (image & 4) != 0
-            # [6] the neighbour's (image's) velocity, mirrored on the flipped axes
-            vj_x = particle_v[j, 0] + kick * particle_a[j, 0]
-            vj_y = particle_v[j, 1] + kick * particle_a[j, 1]
-            vj_z = particle_v[j, 2] + kick * particle_a[j, 2]
-            vk_x = -vj_x if fx else vj_x
-            vk_y = -vj_y if fy else vj_y
-            vk_z = -vj_z if fz else vj_z
+            # [6] the neighbour's velocity; an image's mirrored on the flipped axes
+            vk_x = particle_v[j, 0] + kick * particle_a[j, 0]
+            vk_y = particle_v[j, 1] + kick * particle_a[j, 1]
+            vk_z = particle_v[j, 2] + kick * particle_a[j, 2]
+            if image != 0:
+                vk_x = -vk_x if (image & 1) != 0 else vk_x
+                vk_y = -vk_y if (image & 2) != 0 else vk_y
+                vk_z = -vk_z if (image & 4) != 0 else vk_z
             v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
             # [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
             d -= coef * pair_gradient(P, r2, rlen, image) * v_r

@@ -14,6 +14,8 @@ def pairs(real=np.float32):
 
     @njit
     def pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z):
+        if rlen > real(0.0):
+            return r_x / rlen, r_y / rlen, r_z / rlen
         r_hat_x = real(-1.0) if i < j else real(1.0)
         r_hat_y = real(0.0)
         r_hat_z = real(0.0)
@@ -23,8 +25,6 @@ def pairs(real=np.float32):
             r_hat_x, r_hat_y, r_hat_z = real(0.0), inward_y, real(0.0)
         if (image & 4) != 0:
             r_hat_x, r_hat_y, r_hat_z = real(0.0), real(0.0), inward_z
-        if rlen > real(0.0):
-            r_hat_x, r_hat_y, r_hat_z = r_x / rlen, r_y / rlen, r_z / rlen
         return r_hat_x, r_hat_y, r_hat_z
 
     return pair_direction
