@@ -2,8 +2,9 @@
 // Acceleration from pressure (kernels.glsl: the kernel gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
 // Monaghan 1992: viscosity.glsl; wall images' velocities: walls.glsl), surface
 // tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-// Neighbours, wall and obstacle images as in compute_density; each optional term is compiled out by its
-// specialization constant.
+// Neighbours, wall and obstacle images as in compute_density; with DFSPH, the step's neighbour list
+// (dfsph_factor: the same pairs, in the same order, so the same bits). Each optional term is compiled out
+// by its specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -13,6 +14,7 @@ layout(local_size_x_id = 0) in;
 #include "cells.glsl"
 #include "kernels.glsl"
 #include "pairs.glsl"
+#include "dfsph.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
@@ -26,6 +28,9 @@ layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; }
 layout(std430, binding = 4) readonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+#include "neighbour_list.glsl"
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
@@ -47,11 +52,31 @@ void main() {
     real3 f_pressure = real3(0.0);
     real3 f_viscosity = real3(0.0);
     real3 f_cohesion = real3(0.0);
+    // [5] DFSPH: the list dfsph_factor wrote from these positions this step (neighbour_list.glsl); the
+    //     pressure is the solver's, so viscosity and cohesion only, as in [9] and [10] below
+    if (DFSPH) {
+        uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+        for (uint slot = 0u; slot < count; ++slot) {
+            uint j;
+            uint image;
+            real3 r;
+            real r2;
+            real rlen;
+            real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
+            real grad = pair_gradient(r2, rlen, image);
+            if (VISCOSITY) {
+                real3 vk = image_velocity(particle_v[j].xyz, image);
+                f_viscosity += viscous_term(vi, vk, r, r2, rhoi, particle_rho[j], grad, kernel_laplacian(r2, rlen),
+                                            r_hat);
+            }
+            if (SURFACE_TENSION && image == 0u) f_cohesion += kernel_w(r2) * r;
+        }
+    }
     for (uint image = 0u; image < 8u; ++image) {
-        if ((image & ~mirrored) != 0u) continue;
+        if (DFSPH || (image & ~mirrored) != 0u) continue;
         real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
-        // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
         for (uint k = 0u; k < range_count(); ++k) {
             uint start = 0u;
             uint end = P.n;
@@ -74,36 +99,36 @@ void main() {
                 real pj = particle_p[j];
                 real rlen = sqrt(r2);
                 real grad = pair_gradient(r2, rlen, image);  // kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
-                // [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
+                // [7] direction from the neighbour to i. Where the two coincide (normalize(0) is
                 //     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                 //     along its inward normal; two particles are pushed apart along x,
                 //     antisymmetrically in (i, j), so momentum is conserved
                 real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-                // [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
+                // [8] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
                 //     conserves momentum and energy with summation or continuity density (Monaghan 1992).
                 //     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
                 //     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
                 real fp = P.pressure_coef * (pi_rho2 + pj / (rhoj * rhoj)) * grad;
                 if (!DFSPH) f_pressure += fp * r_hat;  // DFSPH: the pressure is the solver's (dfsph.glsl)
-                // [8] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
+                // [9] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
                 //     artificial, Monaghan 1992); an image's velocity is the wall model's (walls.glsl:
                 //     free slip reverses its normal component, no slip all of it)
                 if (VISCOSITY) {
                     real3 vk = image_velocity(particle_v[j].xyz, image);
                     f_viscosity += viscous_term(vi, vk, r, r2, rhoi, rhoj, grad, kernel_laplacian(r2, rlen), r_hat);
                 }
-                // [9] cohesion: -kappa sum_j W(r_ij) (x_i - x_j) (equal masses), between real
+                // [10] cohesion: -kappa sum_j W(r_ij) (x_i - x_j) (equal masses), between real
                 //     particles only: the walls are not wetted
                 if (SURFACE_TENSION && image == 0u) f_cohesion += kernel_w(r2) * r;
             }
         }
     }
-    // [10] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
+    // [11] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
     //      laminar sum is divided by rho_i, viscosity.glsl)
     real3 a = f_pressure;
     if (VISCOSITY) a += viscous_acceleration(f_viscosity, rhoi);
     if (SURFACE_TENSION) a += P.cohesion_coef * f_cohesion;
     if (GRAVITY) a += P.gravity;
-    // [11] store
+    // [12] store
     particle_a[i] = real4(a, 0.0);
 }

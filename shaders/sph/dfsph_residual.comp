@@ -72,9 +72,10 @@ void main() {
             //     direction from it to i (neighbour_list.glsl)
             uint j;
             uint image;
+            real3 r;
             real r2;
             real rlen;
-            real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r2, rlen);
+            real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
             // [6] the neighbour's velocity; an image's mirrored on the flipped axes
             real3 vk = particle_v[j].xyz + kick * particle_a[j].xyz;
             if (image != 0u) {

@@ -65,9 +65,10 @@ void main() {
         //     direction from it to i (neighbour_list.glsl)
         uint j;
         uint image;
+        real3 r;
         real r2;
         real rlen;
-        real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r2, rlen);
+        real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
         // [6] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
         //     compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];

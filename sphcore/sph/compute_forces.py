@@ -1,8 +1,9 @@
 """Acceleration from pressure (spiky gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
 Monaghan 1992: viscosity.py; wall images' velocities: walls.py), surface
 tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-Neighbours, wall and obstacle images as in compute_density; each optional term is compiled out by its
-closure constant, as the shader's by its specialization constant.
+Neighbours, wall and obstacle images as in compute_density; with DFSPH, the step's neighbour list
+(dfsph_factor: the same pairs, in the same order, so the same bits). Each optional term is compiled out
+by its closure constant, as the shader's by its specialization constant.
 
 Mirror of shaders/sph/compute_forces.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -14,6 +15,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.kernels import kernels
+from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
 from sphcore.sph.viscosity import viscosity
@@ -26,7 +28,7 @@ from sphcore.workgroups import launcher
 def compute_forces(spec, real=np.float32):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
-    DFSPH = spec.DFSPH
+    DFSPH, MAX_NEIGHBOURS = spec.DFSPH, spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
@@ -34,10 +36,11 @@ def compute_forces(spec, real=np.float32):
     viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
+    listed_pair = neighbour_list(spec, real)
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
-                            cell_pyramid, cell_start, obstacle_box):
+                            cell_pyramid, cell_start, obstacle_box, dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -67,12 +70,34 @@ def compute_forces(spec, real=np.float32):
         f_cohesion_x = real(0.0)
         f_cohesion_y = real(0.0)
         f_cohesion_z = real(0.0)
+        # [5] DFSPH: the list dfsph_factor wrote from these positions this step (neighbour_list.glsl); the
+        #     pressure is the solver's, so viscosity and cohesion only, as in [9] and [10] below
+        if DFSPH:
+            count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+            for slot in range(count):
+                j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+                    P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+                    inward_y, inward_z)
+                grad = pair_gradient(P, r2, rlen, image)
+                if VISCOSITY:
+                    vk_x, vk_y, vk_z = image_velocity(particle_v[j, 0], particle_v[j, 1], particle_v[j, 2], image)
+                    t_x, t_y, t_z = viscous_term(P, vi_x, vi_y, vi_z, vk_x, vk_y, vk_z, r_x, r_y, r_z, r2, rhoi,
+                                                 particle_rho[j], grad, kernel_laplacian(P, r2, rlen), r_hat_x, r_hat_y,
+                                                 r_hat_z)
+                    f_viscosity_x += t_x
+                    f_viscosity_y += t_y
+                    f_viscosity_z += t_z
+                if SURFACE_TENSION and image == 0:
+                    w = kernel_w(P, r2)
+                    f_cohesion_x += w * r_x
+                    f_cohesion_y += w * r_y
+                    f_cohesion_z += w * r_z
         for image in range(8):
-            if (image & ~mirrored) != 0:
+            if DFSPH or (image & ~mirrored) != 0:
                 continue
             xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
             for k in range(range_count()):
                 start = 0
                 end = int(P.n)
@@ -100,13 +125,13 @@ def compute_forces(spec, real=np.float32):
                     pj = particle_p[j]
                     rlen = np.sqrt(r2)
                     grad = pair_gradient(P, r2, rlen, image)  # kernels.glsl: m grad_i W_ij = -P.pressure_coef grad r_hat
-                    # [6] direction from the neighbour to i. Where the two coincide (normalize(0) is
+                    # [7] direction from the neighbour to i. Where the two coincide (normalize(0) is
                     #     NaN): an image coincides with i only on a wall or an obstacle's face, so push
                     #     along its inward normal; two particles are pushed apart along x,
                     #     antisymmetrically in (i, j), so momentum is conserved
                     r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
                                                                       inward_y, inward_z)
-                    # [7] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
+                    # [8] pressure: -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W (kernels.glsl), the form that
                     #     conserves momentum and energy with summation or continuity density (Monaghan 1992).
                     #     Mueller et al. (2003) and seed 1 use m (p_i + p_j) / (2 rho_j): that estimates
                     #     grad p / 2, so a column at rest settles at twice its hydrostatic pressure
@@ -115,7 +140,7 @@ def compute_forces(spec, real=np.float32):
                         f_pressure_x += fp * r_hat_x
                         f_pressure_y += fp * r_hat_y
                         f_pressure_z += fp * r_hat_z
-                    # [8] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
+                    # [9] viscosity of the scene's model (viscosity.glsl: laminar, Mueller et al. 2003, or
                     #     artificial, Monaghan 1992); an image's velocity is the wall model's (walls.glsl:
                     #     free slip reverses its normal component, no slip all of it)
                     if VISCOSITY:
@@ -125,14 +150,14 @@ def compute_forces(spec, real=np.float32):
                         f_viscosity_x += t_x
                         f_viscosity_y += t_y
                         f_viscosity_z += t_z
-                    # [9] cohesion: -kappa sum_j W(r_ij) (x_i - x_j) (equal masses), between real
+                    # [10] cohesion: -kappa sum_j W(r_ij) (x_i - x_j) (equal masses), between real
                     #     particles only: the walls are not wetted
                     if SURFACE_TENSION and image == 0:
                         w = kernel_w(P, r2)
                         f_cohesion_x += w * r_x
                         f_cohesion_y += w * r_y
                         f_cohesion_z += w * r_z
-        # [10] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
+        # [11] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
         #      laminar sum is divided by rho_i, viscosity.glsl)
         a_x = f_pressure_x
         a_y = f_pressure_y
@@ -150,7 +175,7 @@ def compute_forces(spec, real=np.float32):
             a_x += P.gravity[0]
             a_y += P.gravity[1]
             a_z += P.gravity[2]
-        # [11] store
+        # [12] store
         particle_a[i, 0] = a_x
         particle_a[i, 1] = a_y
         particle_a[i, 2] = a_z

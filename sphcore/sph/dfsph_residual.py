@@ -65,7 +65,7 @@ def dfsph_residual(spec, real=np.float32):
         for slot in range(count):
             # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
             #     direction from it to i (neighbour_list.glsl)
-            j, image, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+            j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
                 P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
                 inward_z)
             # [6] the neighbour's velocity; an image's mirrored on the flipped axes

@@ -1,9 +1,9 @@
-"""DFSPH's neighbour lists (dfsph.py: written by dfsph_factor), walked by dfsph_residual and
-dfsph_velocity. GLSL reads particle_x and dfsph_neighbours as buffers the including shader declares;
+"""DFSPH's neighbour lists (dfsph.py: written by dfsph_factor), walked by dfsph_residual,
+dfsph_velocity and compute_forces. GLSL reads particle_x and dfsph_neighbours as buffers the including shader declares;
 here they are arguments, after the parameter block.
 
 Mirror of shaders/sph/neighbour_list.glsl: same names, same statements. A GLSL vec3 `v` is
-`v_x, v_y, v_z`; the out parameters j, image, r2 and rlen are returned before the direction.
+`v_x, v_y, v_z`; the out parameters j, image, r, r2 and rlen are returned before the direction.
 """
 from functools import lru_cache
 
@@ -23,7 +23,7 @@ def neighbour_list(spec, real=np.float32):
     @njit
     def listed_pair(P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                     inward_x, inward_y, inward_z):
-        """Entry `slot` of particle i's list: (j, image, r2, rlen, r_hat_x, r_hat_y, r_hat_z)."""
+        """Entry `slot` of particle i's list: (j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z)."""
         pair = int(dfsph_neighbours[slot * P.n + i])
         j = pair & NEIGHBOUR_MASK
         image = pair >> IMAGE_SHIFT
@@ -36,6 +36,6 @@ def neighbour_list(spec, real=np.float32):
         r2 = r_x * r_x + r_y * r_y + r_z * r_z
         rlen = np.sqrt(r2)
         r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
-        return j, image, r2, rlen, r_hat_x, r_hat_y, r_hat_z
+        return j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z
 
     return listed_pair
