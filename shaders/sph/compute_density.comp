@@ -3,7 +3,9 @@
 // pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
 // The kernel is kernels.glsl's (KERNEL). Summation density: rho_i = sum_j m W_ij. Continuity
 // density (CONTINUITY): rho_i is state, integrated by integrate.comp from the d rho/dt written here
-// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl).
+// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With DFSPH the
+// scan also writes the particle's neighbour list (dfsph.glsl), which dfsph_factor, the solves and
+// compute_forces walk.
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -15,6 +17,7 @@ layout(local_size_x_id = 0) in;
 #include "pairs.glsl"
 #include "density_diffusion.glsl"
 #include "equation_of_state.glsl"
+#include "dfsph.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
@@ -28,6 +31,8 @@ layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
 layout(std430, binding = 17) writeonly buffer ParticleDrho { real particle_drho[]; };
+layout(std430, binding = 29) writeonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 30) writeonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 
 // Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
 uint neighbour_hash(uint id, uint image) {
@@ -63,11 +68,13 @@ void main() {
     //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
     //     is within h of xi's own image xm, so the cells searched are those around xm.
     //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
+    //     DFSPH: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
     real sum_w = real(0.0);
     real sum_div = real(0.0);
     real sum_diffusion = real(0.0);
     uint found = 0u;
     uint fingerprint = 0u;
+    uint count = 0u;
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
         bool fx = (image & 1u) != 0u;
@@ -97,6 +104,10 @@ void main() {
                     if (NEIGHBOUR_STATS) {
                         found += 1u;
                         fingerprint += neighbour_hash(particle_id[j], image);
+                    }
+                    if (DFSPH && (j != i || image != 0u)) {
+                        if (count < MAX_NEIGHBOURS) dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT);
+                        count += 1u;
                     }
                 }
                 if (!CONTINUITY || r2 >= P.h2 || (j == i && image == 0u)) continue;
@@ -134,4 +145,5 @@ void main() {
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;
     if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
+    if (DFSPH) dfsph_neighbour_count[i] = count;  // (dfsph_factor flags a list longer than its slots)
 }

@@ -9,12 +9,12 @@
 //   -> compute_forces (no pressure term) -> reduce_dt, choose_dt (CFL on the particle speed)
 //   -> constant-density solve (solve 2) -> integrate (v += dt a, x += dt v).
 // A solve is dfsph_residual, then max_iterations times [dfsph_velocity, dfsph_residual], all recorded into
-// the command buffer (no readback). The positions do not move during
-// the solves, so dfsph_factor's scan of the grid cells also writes each particle's neighbour list: its
+// the command buffer (no readback). The positions do not move from compute_density to integrate, so
+// compute_density's scan of the grid cells also writes each particle's neighbour list: its
 // neighbours and their wall and obstacle images within h, in the scan's order, as j | image << IMAGE_SHIFT
 // in dfsph_neighbours[slot * n + i] (slot < MAX_NEIGHBOURS: consecutive invocations read consecutive
-// words), their number in dfsph_neighbour_count[i]. Every sweep of the solves walks that list
-// (neighbour_list.glsl: listed_pair): the sums
+// words), their number in dfsph_neighbour_count[i]. dfsph_factor, every sweep of the solves and
+// compute_forces walk that list (neighbour_list.glsl: listed_pair): the sums
 // run in the scan's order, with the same terms, over about a third (2D) or a seventh (3D) of the candidates.
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
 // (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level

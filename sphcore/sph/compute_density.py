@@ -14,6 +14,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.density_diffusion import density_diffusion
+from sphcore.sph.dfsph import IMAGE_SHIFT
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
@@ -39,6 +40,7 @@ def compute_density(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
+    DFSPH, MAX_NEIGHBOURS = spec.DFSPH, spec.MAX_NEIGHBOURS
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
     hydrostatic_density, diffusion_term = density_diffusion(spec, real)
@@ -46,7 +48,8 @@ def compute_density(spec, real=np.float32):
 
     @njit
     def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
-                             particle_id, particle_neighbours, obstacle_box, particle_drho):
+                             particle_id, particle_neighbours, obstacle_box, particle_drho, dfsph_neighbours,
+                             dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -76,11 +79,13 @@ def compute_density(spec, real=np.float32):
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
         #     is within h of xi's own image xm, so the cells searched are those around xm.
         #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
+        #     DFSPH: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
         sum_w = real(0.0)
         sum_div = real(0.0)
         sum_diffusion = real(0.0)
         found = 0
         fingerprint = 0
+        count = 0
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
@@ -115,6 +120,10 @@ def compute_density(spec, real=np.float32):
                         if NEIGHBOUR_STATS:
                             found += 1
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
+                        if DFSPH and (j != i or image != 0):
+                            if count < MAX_NEIGHBOURS:
+                                dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT)
+                            count += 1
                     if not CONTINUITY or r2 >= P.h2 or (j == i and image == 0):
                         continue
                     # [6] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
@@ -157,5 +166,7 @@ def compute_density(spec, real=np.float32):
         if NEIGHBOUR_STATS:
             particle_neighbours[i, 0] = found
             particle_neighbours[i, 1] = fingerprint
+        if DFSPH:
+            dfsph_neighbour_count[i] = count  # (dfsph_factor flags a list longer than its slots)
 
     return launcher(compute_density_main)
