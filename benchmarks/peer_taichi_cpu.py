@@ -55,9 +55,10 @@ def run_numba(scene, x0, threads, min_seconds):
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     n = len(x0)
     params = scene.params(n)
-    state = empty_state(params)
+    spec = scene.spec_for("numba")  # (neighbour lists: compute_forces walks compute_density's)
+    state = empty_state(params, max_neighbours=spec.MAX_NEIGHBOURS)
     state["particle_x"][:, :3] = x0
-    be = make_backend("numba", params, state, plan(scene), scene.spec, local_size=128)
+    be = make_backend("numba", params, state, plan(scene), spec, local_size=128)
     try:
         t0 = time.perf_counter()
         be.step(WARMUP_STEPS)

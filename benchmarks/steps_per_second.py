@@ -84,7 +84,8 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
     from sphcore.backends import empty_state, make_backend, plan
     scene, x = make_case(n, dim, search)
     params = scene.params(n)
-    state = empty_state(params, precision)
+    spec = scene.spec_for(backend)  # (numba: neighbour lists)
+    state = empty_state(params, precision, max_neighbours=spec.MAX_NEIGHBOURS)
     state["particle_x"][:, :dim] = x
     options = {"local_size": local_size, "precision": precision}
     if backend == "vulkan":
@@ -92,7 +93,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
         chunk = max(steps_per_submit, min_steps // steps_per_submit * steps_per_submit)
     else:
         chunk = max(1, min_steps)
-    be = make_backend(backend, params, state, plan(scene), scene.spec, **options)
+    be = make_backend(backend, params, state, plan(scene), spec, **options)
     try:
         t0 = time.perf_counter()
         be.step(chunk if backend == "vulkan" else 1)  # numba compiles; vulkan records and runs once

@@ -248,14 +248,15 @@ def check_obstacles(state, spec):
 
 
 def check_neighbours(state, spec):
-    """A DFSPH plan writes spec.MAX_NEIGHBOURS list slots a particle: the state must have room for
-    them (empty_state's `max_neighbours`), and every (j, image) must fit in a word (dfsph.glsl)."""
+    """A plan with neighbour lists (DFSPH, or Scene.spec_for) writes spec.MAX_NEIGHBOURS list slots a
+    particle: the state must have room for them (empty_state's `max_neighbours`), and every (j, image)
+    must fit in a word (dfsph.glsl)."""
     n = len(state["particle_id"])
-    if spec.DFSPH and len(state["dfsph_neighbours"]) < n * spec.MAX_NEIGHBOURS:
+    if len(state["dfsph_neighbours"]) < n * spec.MAX_NEIGHBOURS:
         raise ValueError(f"the plan's neighbour lists need {n} x {spec.MAX_NEIGHBOURS} words but dfsph_neighbours "
                          f"holds {len(state['dfsph_neighbours'])}: pass the scene's spec.MAX_NEIGHBOURS to empty_state")
-    if spec.DFSPH and (n > NEIGHBOUR_MASK or n * spec.MAX_NEIGHBOURS >= 2 ** 32):
-        raise ValueError(f"{n} particles with {spec.MAX_NEIGHBOURS} neighbour slots each: DFSPH's neighbour lists "
+    if spec.MAX_NEIGHBOURS > 0 and (n > NEIGHBOUR_MASK or n * spec.MAX_NEIGHBOURS >= 2 ** 32):
+        raise ValueError(f"{n} particles with {spec.MAX_NEIGHBOURS} neighbour slots each: the neighbour lists "
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 

@@ -58,7 +58,7 @@ def estimate(scene, backend="numba", device_in_host=None, n=None):
 
     n = particle_count(scene) if n is None else n
     precision = scene["physics.precision"]
-    sizes = buffer_bytes(scene.params(n), precision, scene.spec.MAX_NEIGHBOURS)
+    sizes = buffer_bytes(scene.params(n), precision, scene.spec_for(backend).MAX_NEIGHBOURS)
     state = sum(sizes.values())
     carried = sum(sizes[name] for name in CARRIED if name in sizes)
     ordered = sum(size for name, size in sizes.items()

@@ -69,8 +69,9 @@ class Simulation:
         x0 = scene.initial_positions()
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
+        self.spec = scene.spec_for(backend)  # (numba: neighbour lists with the state equation too)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
-                            scene.spec.MAX_NEIGHBOURS)
+                            self.spec.MAX_NEIGHBOURS)
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
         if scene.dfsph:
@@ -78,7 +79,7 @@ class Simulation:
             init_state(state, scene)
             self.solver_log = SolverLog(scene)  # each step's iterations and errors (final.npz: solver_log)
         self.stages = plan(scene)
-        self.backend = make_backend(backend, self.params, state, self.stages, scene.spec,
+        self.backend = make_backend(backend, self.params, state, self.stages, self.spec,
                                     precision=scene["physics.precision"], **backend_options)
         del state, x0
         poll()

@@ -195,6 +195,40 @@ def test_forces_walk_the_list_as_the_scan_would(backend):
 
 
 @pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_state_equation_forces_from_lists_are_the_scans(backend):
+    """With the state equation, numba's runs use neighbour lists (Scene.spec_for): compute_density writes
+    them, compute_forces walks them. Its accelerations are bitwise those of the cell scan (MAX_NEIGHBOURS
+    0), also with lists too short for most particles (8 slots: those are scanned), on both backends."""
+    from sphcore.backends import empty_state, make_backend, plan
+    if backend == "vulkan":
+        vulkan_or_skip()
+    scene = scene_of(**{"physics.pressure_solver": "state_equation", "physics.surface_tension": True})
+    assert scene.spec.MAX_NEIGHBOURS == 0 and scene.spec_for("numba").MAX_NEIGHBOURS == scene.max_neighbours == 26
+    assert scene.spec_for("vulkan") == scene.spec
+    with Simulation(scene, "numba") as sim:
+        sim.advance(40)  # the column collapsing into the corner: images of both walls
+        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
+    stages = [s for s in plan(scene) if s.name in ("compute_density", "compute_forces") or not s.name.startswith(
+        ("compute_", "reduce_dt", "choose_dt", "integrate"))]
+    accelerations, counts = {}, {}
+    for slots in (0, 26, 8):
+        state = empty_state(scene.params(sim.n), max_neighbours=slots)
+        state.update({k: v.copy() for k, v in moving.items()})
+        b = make_backend(backend, scene.params(sim.n), state, stages, scene.spec._replace(MAX_NEIGHBOURS=slots))
+        try:
+            for stage in stages:
+                b.run_stage(stage)
+            out = b.read()
+            accelerations[slots], counts[slots] = out["particle_a"], out["dfsph_neighbour_count"]
+        finally:
+            b.close()
+    assert np.abs(accelerations[0]).max() > 9.81 * 1.01  # more than gravity acts
+    assert 0 < (counts[8] > 8).sum() < sim.n and counts[26].max() <= 26  # lists too short for some, not all
+    assert np.array_equal(accelerations[26], accelerations[0])
+    assert np.array_equal(accelerations[8], accelerations[0])
+
+
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
 def test_neighbour_list_overflow_stops_the_run_naming_the_step(backend):
     if backend == "vulkan":
         vulkan_or_skip()

@@ -3,9 +3,9 @@
 // pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
 // The kernel is kernels.glsl's (KERNEL). Summation density: rho_i = sum_j m W_ij. Continuity
 // density (CONTINUITY): rho_i is state, integrated by integrate.comp from the d rho/dt written here
-// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With DFSPH the
-// scan also writes the particle's neighbour list (dfsph.glsl), which dfsph_factor, the solves and
-// compute_forces walk.
+// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With neighbour
+// lists (MAX_NEIGHBOURS > 0: DFSPH, and numba's state equation, Scene.spec_for) the scan also writes the
+// particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves.
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -68,7 +68,7 @@ void main() {
     //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
     //     is within h of xi's own image xm, so the cells searched are those around xm.
     //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
-    //     DFSPH: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
+    //     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
     real sum_w = real(0.0);
     real sum_div = real(0.0);
     real sum_diffusion = real(0.0);
@@ -105,7 +105,7 @@ void main() {
                         found += 1u;
                         fingerprint += neighbour_hash(particle_id[j], image);
                     }
-                    if (DFSPH && (j != i || image != 0u)) {
+                    if (MAX_NEIGHBOURS > 0u && (j != i || image != 0u)) {
                         if (count < MAX_NEIGHBOURS) dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT);
                         count += 1u;
                     }
@@ -145,5 +145,5 @@ void main() {
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;
     if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
-    if (DFSPH) dfsph_neighbour_count[i] = count;  // (dfsph_factor flags a list longer than its slots)
+    if (MAX_NEIGHBOURS > 0u) dfsph_neighbour_count[i] = count;  // (dfsph_factor flags a list longer than its slots)
 }

@@ -2,9 +2,9 @@
 // Acceleration from pressure (kernels.glsl: the kernel gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
 // Monaghan 1992: viscosity.glsl; wall images' velocities: walls.glsl), surface
 // tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-// Neighbours, wall and obstacle images as in compute_density; with DFSPH, the step's neighbour list
-// (dfsph_factor: the same pairs, in the same order, so the same bits). Each optional term is compiled out
-// by its specialization constant.
+// Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and numba's
+// state equation: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
+// so the same bits). Each optional term is compiled out by its specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -52,10 +52,12 @@ void main() {
     real3 f_pressure = real3(0.0);
     real3 f_viscosity = real3(0.0);
     real3 f_cohesion = real3(0.0);
-    // [5] DFSPH: the list dfsph_factor wrote from these positions this step (neighbour_list.glsl); the
-    //     pressure is the solver's, so viscosity and cohesion only, as in [9] and [10] below
-    if (DFSPH) {
-        uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+    // [5] with neighbour lists (DFSPH; numba: Scene.spec_for), the list compute_density wrote from these
+    //     positions this step (neighbour_list.glsl): the pairs of the scan below in its order, with the same
+    //     terms as [8]-[10]. A particle with more neighbours than its list's slots is scanned instead
+    bool listed = MAX_NEIGHBOURS > 0u && dfsph_neighbour_count[i] <= MAX_NEIGHBOURS;
+    if (listed) {
+        uint count = dfsph_neighbour_count[i];
         for (uint slot = 0u; slot < count; ++slot) {
             uint j;
             uint image;
@@ -64,16 +66,20 @@ void main() {
             real rlen;
             real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
             real grad = pair_gradient(r2, rlen, image);
+            real rhoj = particle_rho[j];
+            if (!DFSPH) {
+                real fp = P.pressure_coef * (pi_rho2 + particle_p[j] / (rhoj * rhoj)) * grad;
+                f_pressure += fp * r_hat;
+            }
             if (VISCOSITY) {
                 real3 vk = image_velocity(particle_v[j].xyz, image);
-                f_viscosity += viscous_term(vi, vk, r, r2, rhoi, particle_rho[j], grad, kernel_laplacian(r2, rlen),
-                                            r_hat);
+                f_viscosity += viscous_term(vi, vk, r, r2, rhoi, rhoj, grad, kernel_laplacian(r2, rlen), r_hat);
             }
             if (SURFACE_TENSION && image == 0u) f_cohesion += kernel_w(r2) * r;
         }
     }
     for (uint image = 0u; image < 8u; ++image) {
-        if (DFSPH || (image & ~mirrored) != 0u) continue;
+        if (listed || (image & ~mirrored) != 0u) continue;
         real3 xm = reflected(xi, wall, image);
         ivec3 base = cell_of(xm);
         // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)

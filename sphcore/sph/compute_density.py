@@ -2,7 +2,8 @@
 pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
 The kernel is kernels.glsl's (KERNEL). Summation density, or with CONTINUITY the rate d rho/dt
 (particle_drho) of the density that integrate.comp integrates, with density diffusion
-(DENSITY_DIFFUSION).
+(DENSITY_DIFFUSION). With neighbour lists (MAX_NEIGHBOURS > 0) the scan also writes each particle's
+list (dfsph.py), which compute_forces walks, and under DFSPH dfsph_factor and the solves.
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -40,7 +41,7 @@ def compute_density(spec, real=np.float32):
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
-    DFSPH, MAX_NEIGHBOURS = spec.DFSPH, spec.MAX_NEIGHBOURS
+    MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
     hydrostatic_density, diffusion_term = density_diffusion(spec, real)
@@ -79,7 +80,7 @@ def compute_density(spec, real=np.float32):
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
         #     is within h of xi's own image xm, so the cells searched are those around xm.
         #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
-        #     DFSPH: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
+        #     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
         sum_w = real(0.0)
         sum_div = real(0.0)
         sum_diffusion = real(0.0)
@@ -120,7 +121,7 @@ def compute_density(spec, real=np.float32):
                         if NEIGHBOUR_STATS:
                             found += 1
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
-                        if DFSPH and (j != i or image != 0):
+                        if MAX_NEIGHBOURS > 0 and (j != i or image != 0):
                             if count < MAX_NEIGHBOURS:
                                 dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT)
                             count += 1
@@ -166,7 +167,7 @@ def compute_density(spec, real=np.float32):
         if NEIGHBOUR_STATS:
             particle_neighbours[i, 0] = found
             particle_neighbours[i, 1] = fingerprint
-        if DFSPH:
+        if MAX_NEIGHBOURS > 0:
             dfsph_neighbour_count[i] = count  # (dfsph_factor flags a list longer than its slots)
 
     return launcher(compute_density_main)

@@ -1,9 +1,10 @@
 """Acceleration from pressure (spiky gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
 Monaghan 1992: viscosity.py; wall images' velocities: walls.py), surface
 tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-Neighbours, wall and obstacle images as in compute_density; with DFSPH, the step's neighbour list
-(dfsph_factor: the same pairs, in the same order, so the same bits). Each optional term is compiled out
-by its closure constant, as the shader's by its specialization constant.
+Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and numba's
+state equation: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
+so the same bits). Each optional term is compiled out by its closure constant, as the shader's by its
+specialization constant.
 
 Mirror of shaders/sph/compute_forces.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -70,19 +71,27 @@ def compute_forces(spec, real=np.float32):
         f_cohesion_x = real(0.0)
         f_cohesion_y = real(0.0)
         f_cohesion_z = real(0.0)
-        # [5] DFSPH: the list dfsph_factor wrote from these positions this step (neighbour_list.glsl); the
-        #     pressure is the solver's, so viscosity and cohesion only, as in [9] and [10] below
-        if DFSPH:
-            count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        # [5] with neighbour lists (DFSPH; numba: Scene.spec_for), the list compute_density wrote from these
+        #     positions this step (neighbour_list.glsl): the pairs of the scan below in its order, with the same
+        #     terms as [8]-[10]. A particle with more neighbours than its list's slots is scanned instead
+        listed = MAX_NEIGHBOURS > 0 and int(dfsph_neighbour_count[i]) <= MAX_NEIGHBOURS
+        if listed:
+            count = int(dfsph_neighbour_count[i])
             for slot in range(count):
                 j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
                     P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
                     inward_y, inward_z)
                 grad = pair_gradient(P, r2, rlen, image)
+                rhoj = particle_rho[j]
+                if not DFSPH:
+                    fp = P.pressure_coef * (pi_rho2 + particle_p[j] / (rhoj * rhoj)) * grad
+                    f_pressure_x += fp * r_hat_x
+                    f_pressure_y += fp * r_hat_y
+                    f_pressure_z += fp * r_hat_z
                 if VISCOSITY:
                     vk_x, vk_y, vk_z = image_velocity(particle_v[j, 0], particle_v[j, 1], particle_v[j, 2], image)
                     t_x, t_y, t_z = viscous_term(P, vi_x, vi_y, vi_z, vk_x, vk_y, vk_z, r_x, r_y, r_z, r2, rhoi,
-                                                 particle_rho[j], grad, kernel_laplacian(P, r2, rlen), r_hat_x, r_hat_y,
+                                                 rhoj, grad, kernel_laplacian(P, r2, rlen), r_hat_x, r_hat_y,
                                                  r_hat_z)
                     f_viscosity_x += t_x
                     f_viscosity_y += t_y
@@ -93,7 +102,7 @@ def compute_forces(spec, real=np.float32):
                     f_cohesion_y += w * r_y
                     f_cohesion_z += w * r_z
         for image in range(8):
-            if DFSPH or (image & ~mirrored) != 0:
+            if listed or (image & ~mirrored) != 0:
                 continue
             xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
