@@ -145,5 +145,5 @@ void main() {
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;
     if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
-    if (MAX_NEIGHBOURS > 0u) dfsph_neighbour_count[i] = count;  // (dfsph_factor flags a list longer than its slots)
+    if (MAX_NEIGHBOURS > 0u) dfsph_neighbour_count[i] = count;  // (longer than its slots: compute_forces scans, DFSPH stops)
 }

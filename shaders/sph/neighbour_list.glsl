@@ -1,7 +1,7 @@
-// DFSPH's neighbour lists (dfsph.glsl: written by dfsph_factor), walked by dfsph_residual,
-// dfsph_velocity and compute_forces. Needs particle_x and dfsph_neighbours declared by the shader that includes this file
-// (after cells.glsl, pairs.glsl and dfsph.glsl). Mirror: sphcore/sph/neighbour_list.py (same names,
-// same statements).
+// The neighbour lists (dfsph.glsl: written by compute_density's scan), walked by compute_forces, and under
+// DFSPH by dfsph_factor, dfsph_residual and dfsph_velocity. Needs particle_x and dfsph_neighbours declared
+// by the shader that includes this file (after cells.glsl, pairs.glsl and dfsph.glsl).
+// Mirror: sphcore/sph/neighbour_list.py (same names, same statements).
 
 // Entry `slot` of particle i's list: its neighbour j, or j's image across the walls and obstacle faces
 // whose bits are set in `image` (`wall`, `inward`: near_walls and near_obstacles at xi), with r = xi - x_k,

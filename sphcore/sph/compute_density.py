@@ -168,6 +168,6 @@ def compute_density(spec, real=np.float32):
             particle_neighbours[i, 0] = found
             particle_neighbours[i, 1] = fingerprint
         if MAX_NEIGHBOURS > 0:
-            dfsph_neighbour_count[i] = count  # (dfsph_factor flags a list longer than its slots)
+            dfsph_neighbour_count[i] = count  # (longer than its slots: compute_forces scans, DFSPH stops)
 
     return launcher(compute_density_main)

@@ -1,6 +1,6 @@
-"""DFSPH's neighbour lists (dfsph.py: written by dfsph_factor), walked by dfsph_residual,
-dfsph_velocity and compute_forces. GLSL reads particle_x and dfsph_neighbours as buffers the including shader declares;
-here they are arguments, after the parameter block.
+"""The neighbour lists (dfsph.py: written by compute_density's scan), walked by compute_forces, and under
+DFSPH by dfsph_factor, dfsph_residual and dfsph_velocity. GLSL reads particle_x and dfsph_neighbours as
+buffers the including shader declares; here they are arguments, after the parameter block.
 
 Mirror of shaders/sph/neighbour_list.glsl: same names, same statements. A GLSL vec3 `v` is
 `v_x, v_y, v_z`; the out parameters j, image, r, r2 and rlen are returned before the direction.
