@@ -168,9 +168,9 @@ def test_neighbour_lists_hold_every_pair_within_h():
 
 @pytest.mark.parametrize("backend", ["numba", "vulkan"])
 def test_forces_walk_the_list_as_the_scan_would(backend):
-    """Under DFSPH compute_forces walks dfsph_factor's list. The same state through the state equation's
-    compute_forces (the cell scan), its pressures zeroed so that viscosity, cohesion and gravity alone act,
-    gives bitwise the same accelerations: the same pairs in the same order."""
+    """Under DFSPH compute_forces walks the step's list (compute_density's). The same state through the state
+    equation's compute_forces (the cell scan), its pressures zeroed so that viscosity, cohesion and gravity
+    alone act, gives bitwise the same accelerations: the same pairs in the same order."""
     from sphcore.backends import make_backend
     if backend == "vulkan":
         vulkan_or_skip()
