@@ -84,7 +84,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
     from sphcore.backends import empty_state, make_backend, plan
     scene, x = make_case(n, dim, search)
     params = scene.params(n)
-    spec = scene.spec_for(backend)  # (numba: neighbour lists)
+    spec = scene.spec_for(backend)  # (neighbour lists)
     state = empty_state(params, precision, max_neighbours=spec.MAX_NEIGHBOURS)
     state["particle_x"][:, :dim] = x
     options = {"local_size": local_size, "precision": precision}

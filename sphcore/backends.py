@@ -260,12 +260,17 @@ def check_neighbours(state, spec):
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 
+# The per-particle buffers in_particle_order returns (the state a reader of a run sees).
+PARTICLE_BUFFERS = tuple(name for name, (_, c, length) in BUFFERS.items()
+                         if length == "particles" and name.startswith("particle_"))
+
+
 def in_particle_order(state, dim=None):
     """Per-particle arrays ordered by particle id (undoing the grid's sort), vectors cut to `dim`."""
     order = np.argsort(state["particle_id"], kind="stable")
     out = {}
     for name, (_, c, length) in BUFFERS.items():
-        if length == "particles" and name.startswith("particle_"):
+        if name in PARTICLE_BUFFERS:
             values = state[name][order]
             out[name] = values[:, :dim] if c == 4 and dim else values
     return out
@@ -354,8 +359,9 @@ class NumbaBackend:
                     self.profile.add(stage.name, time.perf_counter() - start)
         self.profile.steps += count
 
-    def read(self):
-        return {k: v.copy() for k, v in self.state.items()}
+    def read(self, names=None):
+        """Copies of the buffers `names` (default: every buffer)."""
+        return {k: self.state[k].copy() for k in (BUFFERS if names is None else names)}
 
     def read_buffer(self, name):
         """One buffer's contents (a copy)."""
@@ -455,8 +461,10 @@ class VulkanBackend:
         if rest:
             self._submit_steps(rest)
 
-    def read(self):
-        return {name: self.buffers[name].read(self.dtypes[name], self.shapes[name]) for name in BUFFERS}
+    def read(self, names=None):
+        """The buffers `names` (default: every buffer), read back from the device."""
+        return {name: self.buffers[name].read(self.dtypes[name], self.shapes[name])
+                for name in (BUFFERS if names is None else names)}
 
     def read_buffer(self, name):
         """One buffer's contents, read back from the device."""

@@ -70,7 +70,9 @@ def stable_dt(scene, max_speed=0.0):
     return bounds[name], name
 
 
-LIST_WORDS = 1 << 28  # spec_for: the most list slots (4 bytes each) numba gets for the state equation
+# spec_for: the most list slots (4 bytes each) a backend gets for the state equation: 1 GiB of host memory on
+# numba, a 4 GiB buffer on Vulkan (its largest storage buffer)
+LIST_WORDS = {"numba": 1 << 28, "vulkan": (1 << 30) - 1}
 
 class SceneError(ValueError):
     """A scene that cannot be run; the message names the file and the key."""
@@ -577,18 +579,17 @@ class Scene:
                     MAX_NEIGHBOURS=self.max_neighbours if self.dfsph else 0)
 
     def spec_for(self, backend):
-        """The spec a run on `backend` compiles: the scene's, and on numba with the state equation also
-        neighbour lists (MAX_NEIGHBOURS), which compute_density's scan writes and compute_forces walks
-        instead of scanning the cells a second time: the same pairs in the same order, so the same bits
-        (a particle with more neighbours than the list's slots is scanned as before). Measured, 3D, 64,000
-        particles: 1.67x faster on numba, but 1.35x (1 M) to 1.6x (8 M) slower on the H200, whose second
-        scan hits its caches while the list is read from memory; so the GPU scans (DFSPH lists everywhere:
-        its solves walk them many times a step). Lists of more than LIST_WORDS words in all (a large
-        scene, or a large fluid.smoothing_ratio) are left out: the scan needs no memory."""
+        """The spec a run on `backend` compiles: the scene's, and with the state equation also neighbour
+        lists (MAX_NEIGHBOURS, as DFSPH always has them), which compute_density's scan writes and
+        compute_forces walks instead of scanning the cells a second time: the same pairs in the same
+        order, so the same bits (a particle with more neighbours than the list's slots is scanned as
+        before). Measured, 3D, h = 2 dx: numba 1.67x faster at 64,000 particles, the H200 1.13x at 1 M
+        and 1.12x at 8 M. Lists of more than LIST_WORDS[backend] words in all (a large scene, or a large
+        fluid.smoothing_ratio) are left out: the scan needs no memory."""
         from sphcore.memory import particle_count
 
         spec = self.spec
-        if backend == "numba" and not spec.DFSPH and particle_count(self) * self.max_neighbours <= LIST_WORDS:
+        if not spec.DFSPH and particle_count(self) * self.max_neighbours <= LIST_WORDS.get(backend, 0):
             spec = spec._replace(MAX_NEIGHBOURS=self.max_neighbours)
         return spec
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sphcore.backends import empty_state, in_particle_order, make_backend, plan
+from sphcore.backends import PARTICLE_BUFFERS, empty_state, in_particle_order, make_backend, plan
 from sphcore.scene import stable_dt
 from sphcore.signals import Interrupted, Signals  # noqa: F401 (Interrupted: sphcore.simulation.Interrupted)
 
@@ -39,6 +39,8 @@ CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p
            "particle_vh", "time_state",  # Verlet's half-step velocity; dt, the last dt and the time (adaptive dt)
            "dfsph_control", "dfsph_state",  # DFSPH: its step count, unconverged solves, tolerances and errors,
            "particle_kappa")  # and its warm start
+# What read() takes from the backend: the per-particle state, the grid's status and the carried buffers.
+READ = tuple(dict.fromkeys((*PARTICLE_BUFFERS, "grid_status", *CARRIED)))
 
 
 class Simulation:
@@ -69,7 +71,7 @@ class Simulation:
         x0 = scene.initial_positions()
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
-        self.spec = scene.spec_for(backend)  # (numba: neighbour lists with the state equation too)
+        self.spec = scene.spec_for(backend)  # (neighbour lists with the state equation too, where they fit)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
                             self.spec.MAX_NEIGHBOURS)
         state["particle_x"][:, :self.dim] = x0
@@ -129,7 +131,7 @@ class Simulation:
         """The state in particle order (vectors of `dim` components), checked. A check that fails
         more than one step after the last good one is replayed from there a step at a time, so
         the error names the first step at which the state went wrong."""
-        raw = self.backend.read()
+        raw = self.backend.read(READ)  # (not the scratch, the grid or the neighbour lists: each step rewrites them)
         state = in_particle_order(raw, self.dim)
         try:
             self.check(state)
@@ -208,7 +210,7 @@ class Simulation:
                 abs(self.energy_start) + self.n * self.scene.mass * 1e-4 * c2):
             raise CheckpointError(f"checkpoint field energy_start = {stored:.6g} J is not the energy of the scene's "
                                   f"initial state, {self.energy_start:.6g} J: the checkpoint was altered")
-        current = self.backend.read()
+        current = self.backend.read(CARRIED)
         for name in CARRIED:
             values = arrays[f"buffer_{name}"]
             if values.shape != current[name].shape or values.dtype != current[name].dtype:

@@ -117,10 +117,8 @@ def test_estimate_per_backend_and_precision():
                                            "physics": {**scene.config["physics"], "precision": "float64"}}), "numba")[1]
     assert f32["buffers"] < f64["buffers"] < 2 * f32["buffers"]  # the uint32 buffers stay
     gpu, cpu = memory.estimate(scene, "vulkan")[1], memory.estimate(scene, "vulkan", device_in_host=True)[1]
+    assert gpu["buffers"] == 0 and cpu["buffers"] == f32["buffers"] and gpu["staging"] > 0
     n = memory.particle_count(scene)
-    slots = scene.spec_for("numba").MAX_NEIGHBOURS  # numba's neighbour lists (Scene.spec_for), not Vulkan's
-    assert slots > 0 and f32["buffers"] - cpu["buffers"] == 4 * (n * slots - 1)  # (an unused list keeps one word)
-    assert gpu["buffers"] == 0 and gpu["staging"] > 0
     per = [memory.estimate(scene, "numba", n=k)[0] for k in (n, 2 * n, 3 * n)]
     assert per[2] - per[1] == per[1] - per[0] > 0
 

@@ -4,7 +4,7 @@
 // The kernel is kernels.glsl's (KERNEL). Summation density: rho_i = sum_j m W_ij. Continuity
 // density (CONTINUITY): rho_i is state, integrated by integrate.comp from the d rho/dt written here
 // (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With neighbour
-// lists (MAX_NEIGHBOURS > 0: DFSPH, and numba's state equation, Scene.spec_for) the scan also writes the
+// lists (MAX_NEIGHBOURS > 0: DFSPH, and the state equation where they fit, Scene.spec_for) the scan also writes the
 // particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves.
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require

@@ -2,8 +2,8 @@
 // Acceleration from pressure (kernels.glsl: the kernel gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
 // Monaghan 1992: viscosity.glsl; wall images' velocities: walls.glsl), surface
 // tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-// Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and numba's
-// state equation: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
+// Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and the state
+// equation where they fit: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
 // so the same bits). Each optional term is compiled out by its specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
@@ -52,7 +52,7 @@ void main() {
     real3 f_pressure = real3(0.0);
     real3 f_viscosity = real3(0.0);
     real3 f_cohesion = real3(0.0);
-    // [5] with neighbour lists (DFSPH; numba: Scene.spec_for), the list compute_density wrote from these
+    // [5] with neighbour lists (Scene.spec_for), the list compute_density wrote from these
     //     positions this step (neighbour_list.glsl): the pairs of the scan below in its order, with the same
     //     terms as [8]-[10]. A particle with more neighbours than its list's slots is scanned instead
     bool listed = MAX_NEIGHBOURS > 0u && dfsph_neighbour_count[i] <= MAX_NEIGHBOURS;

@@ -1,8 +1,8 @@
 """Acceleration from pressure (spiky gradient), viscosity (laminar, Mueller et al. 2003, or artificial,
 Monaghan 1992: viscosity.py; wall images' velocities: walls.py), surface
 tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
-Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and numba's
-state equation: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
+Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and the state
+equation where they fit: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
 so the same bits). Each optional term is compiled out by its closure constant, as the shader's by its
 specialization constant.
 
@@ -71,7 +71,7 @@ def compute_forces(spec, real=np.float32):
         f_cohesion_x = real(0.0)
         f_cohesion_y = real(0.0)
         f_cohesion_z = real(0.0)
-        # [5] with neighbour lists (DFSPH; numba: Scene.spec_for), the list compute_density wrote from these
+        # [5] with neighbour lists (Scene.spec_for), the list compute_density wrote from these
         #     positions this step (neighbour_list.glsl): the pairs of the scan below in its order, with the same
         #     terms as [8]-[10]. A particle with more neighbours than its list's slots is scanned instead
         listed = MAX_NEIGHBOURS > 0 and int(dfsph_neighbour_count[i]) <= MAX_NEIGHBOURS
