@@ -25,8 +25,8 @@ from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
-from sphcore.sph.dfsph import (CONTROL_SIZE, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
-                               SOLVE_WARM_START, dispatch_base)
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP, CONTROL_WINDOW, HISTORY_ROWS,
+                               NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START, dispatch_base)
 from sphcore.sph.dfsph_factor import dfsph_factor
 from sphcore.sph.dfsph_residual import dfsph_residual
 from sphcore.sph.dfsph_velocity import dfsph_velocity
@@ -374,10 +374,21 @@ class NumbaBackend:
         pass
 
 
+FIRST_WINDOW = 8  # DFSPH on Vulkan: the iterations recorded per window of a solve before any step has run
+LEAST_WINDOW = 4  # and the least after that (VulkanBackend.next_window)
+WINDOW_LOOKBACK = 32  # the steps whose iterations size the next windows (at most HISTORY_ROWS)
+
+
 class VulkanBackend:
     """The shaders through Vulkan: device-local buffers, many steps per command buffer. With
     precision "float64" the shaders are built with SPHCORE_FLOAT64 (the device must support
-    shaderFloat64, else VulkanError); `state` is converted to `precision`."""
+    shaderFloat64, else VulkanError); `state` is converted to `precision`.
+
+    DFSPH, where the device has conditional rendering: each solve's iterations are recorded a window at a
+    time (shaders/sph/dfsph.glsl: windows), sized from the iterations the last steps took, rather than
+    the whole budget, most of which would be dispatches of no work groups. A solve that spends its
+    window unconverged skips the rest of the submission; `step` then records its next window and the
+    rest of that step, and goes on: the same updates in the same order as with the whole budget recorded."""
 
     name = "vulkan"
 
@@ -407,6 +418,12 @@ class VulkanBackend:
         for name in sorted({s.name for s in stages}):
             self._pipeline(name)
         self._recordings = {}
+        # DFSPH: each solve's budget (its recorded iterations in the plan) and window
+        self.budget = {solve: sum(s.indirect and s.level == solve for s in stages) // 2
+                       for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY)}
+        self.windows, self.resumptions = None, 0  # (resumptions: submissions that went on from a spent window)
+        if spec.DFSPH and self.ctx.conditional_rendering and self.budget[SOLVE_DENSITY] > 0:
+            self.windows = {solve: min(FIRST_WINDOW, budget) for solve, budget in self.budget.items()}
 
     def _pipeline(self, name):
         """The compute pipeline of shader `name`, built on first use with the scene's constants."""
@@ -419,35 +436,100 @@ class VulkanBackend:
             self.pipelines[name] = pipeline
         return self.pipelines[name]
 
-    def _recording(self, steps, stages, timed=False):
-        """`steps` steps of `stages` in one command buffer; `timed`: a timestamp after each dispatch."""
-        key = (steps, tuple(stages), timed)
+    def _recording(self, steps, stages, timed=False, predicate=False, secondary=False):
+        """`steps` steps of `stages` in one command buffer (`secondary`: a secondary one); `timed`: a
+        timestamp after each dispatch; `predicate`: each dispatch only while dfsph_control[CONTROL_RUNNING]
+        is not 0. Untimed, the steps run one step's secondary command buffer (recorded once: a dispatch
+        costs about 30 us of Python to record)."""
+        key = (steps, tuple(stages), timed, predicate, secondary)
         if key not in self._recordings:
-            rec = self.ctx.record()
-            rec.timer = self.ctx.timer(steps * len(stages) + 1) if timed else None
+            rec = self.ctx.record(secondary)
+            rec.stages = stages * steps
+            rec.timer = self.ctx.timer(len(rec.stages) + 1) if timed else None
+            if steps > 1 and not timed:
+                rec.execute([self._recording(1, stages, predicate=predicate, secondary=True)] * steps)
+                self._recordings[key] = rec.end()
+                return rec
+            control = self.buffers["dfsph_control"]
+            running = (control, 4 * CONTROL_RUNNING) if predicate else None
             if timed:
                 rec.timestamp(rec.timer, 0)
-            for s in range(steps):
-                for k, stage in enumerate(stages):
-                    if stage.indirect:
-                        rec.dispatch_indirect(self.pipelines[stage.name], stage_params(self.params, stage),
-                                              self.buffers["dfsph_control"], 4 * indirect_offset(stage))
-                    else:
-                        rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
-                                     dispatch_size(stage, self.params))
-                    rec.barrier()
-                    if timed:
-                        rec.timestamp(rec.timer, 1 + s * len(stages) + k)
+            for k, stage in enumerate(rec.stages):
+                if stage.indirect:
+                    rec.dispatch_indirect(self.pipelines[stage.name], stage_params(self.params, stage), control,
+                                          4 * indirect_offset(stage), predicate=running)
+                else:
+                    rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
+                                 dispatch_size(stage, self.params), predicate=running)
+                rec.barrier()
+                if timed:
+                    rec.timestamp(rec.timer, 1 + k)
             self._recordings[key] = rec.end()
         return self._recordings[key]
 
-    def _submit_steps(self, steps):
-        rec = self._recording(steps, self.stages, timed=self.profile is not None)
+    def _submit(self, rec):
         self.ctx.submit(rec)
         if rec.timer is not None:
-            for stage, seconds in zip(self.stages * steps, rec.timer.seconds()):
+            for stage, seconds in zip(rec.stages, rec.timer.seconds()):
                 self.profile.add(stage.name, seconds)
+
+    def _submit_steps(self, steps):
+        self._submit(self._recording(steps, self.stages, timed=self.profile is not None))
+        if self.profile is not None:
             self.profile.steps += steps
+
+    def _windowed(self, stages):
+        """`stages` with each run of a solve's indirect stages cut to its window's iterations."""
+        out, run = [], 0
+        for stage in stages:
+            run = run + 1 if stage.indirect else 0
+            if not stage.indirect or run <= 2 * self.windows[stage.level]:
+                out.append(stage)
+        return out
+
+    def _resumed(self, solve):
+        """What a step suspended at the end of a window of `solve` has left: the solve's next window, then
+        the stages after it (windowed)."""
+        last = max(k for k, s in enumerate(self.stages) if s.indirect and s.level == solve)
+        return self._windowed(dfsph_solve(solve, self.windows[solve])[1:] + self.stages[last + 1:])
+
+    def _windowed_steps(self, steps, control):
+        """Run `steps` steps with windows (dfsph.glsl), resuming each suspended solve, from the device's
+        dfsph_control as `control` holds it; return the control after them."""
+        first, timed = int(control[CONTROL_STEP]), self.profile is not None
+        stages = self._windowed(self.stages)
+        while True:
+            control[CONTROL_RUNNING] = 1
+            for solve, window in self.windows.items():
+                control[CONTROL_WINDOW + solve] = window
+            self.buffers["dfsph_control"].write(control)
+            self._submit(self._recording(steps, stages, timed, predicate=True))
+            control = self.read_buffer("dfsph_control")
+            if control[CONTROL_RUNNING]:
+                break
+            # a solve spent its window unconverged, the rest of the submission was skipped: resume there
+            solve = SOLVE_DIVERGENCE if not control[CONTROL_DONE + SOLVE_DIVERGENCE] else SOLVE_DENSITY
+            stages, steps = self._resumed(solve), 1
+            self.resumptions += 1
+        last = int(control[CONTROL_STEP])
+        if timed:
+            self.profile.steps += last - first
+        # the next windows, from the iterations the last WINDOW_LOOKBACK steps took
+        if last > first:
+            history = self.read_buffer("dfsph_history")
+            rows = history[[(step - 1) % HISTORY_ROWS for step in range(max(0, last - WINDOW_LOOKBACK) + 1, last + 1)]]
+            for solve, column in ((SOLVE_DIVERGENCE, 3), (SOLVE_DENSITY, 5)):
+                self.windows[solve] = self.next_window(int(rows[:, column].max()), self.budget[solve])
+        return control, last - first
+
+    @staticmethod
+    def next_window(most, budget):
+        """A solve's next window, from the most iterations it took in the last WINDOW_LOOKBACK steps: the least
+        power of two (few distinct recordings) above most + 1, at least LEAST_WINDOW, within its budget. A
+        window too short costs a resumption (a round trip to the host, about a millisecond), one too long
+        two empty dispatches per iteration (a few microseconds; measured on the H200 in
+        benchmarks/results/dfsph/h200/windows.json)."""
+        return min(budget, max(LEAST_WINDOW, 1 << (most + 1).bit_length()))
 
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
@@ -455,11 +537,21 @@ class VulkanBackend:
         self.ctx.submit(self._recording(1, [stage]))
 
     def step(self, count=1):
-        full, rest = divmod(count, self.steps_per_submit)
-        for _ in range(full):
-            self._submit_steps(self.steps_per_submit)
-        if rest:
-            self._submit_steps(rest)
+        if self.windows is None:
+            full, rest = divmod(count, self.steps_per_submit)
+            for _ in range(full):
+                self._submit_steps(self.steps_per_submit)
+            if rest:
+                self._submit_steps(rest)
+            return
+        control, done = self.read_buffer("dfsph_control"), 0
+        while done < count:
+            steps = min(count - done, self.steps_per_submit)
+            control, steps = self._windowed_steps(steps, control)
+            done += steps
+        # the state as the mirror keeps it: no window
+        control[CONTROL_WINDOW + SOLVE_DIVERGENCE] = control[CONTROL_WINDOW + SOLVE_DENSITY] = 0
+        self.buffers["dfsph_control"].write(control)
 
     def read(self, names=None):
         """The buffers `names` (default: every buffer), read back from the device."""

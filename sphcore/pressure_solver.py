@@ -12,7 +12,7 @@ import numpy as np
 
 from sphcore.simulation import SimulationError
 from sphcore.sph.dfsph import (CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES, CONTROL_MAX_ITERATIONS,
-                               CONTROL_OVERFLOW_STEP, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_FAILED_ERROR,
+                               CONTROL_OVERFLOW_STEP, CONTROL_RUNNING, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_FAILED_ERROR,
                                STATE_TOLERANCE)
 
 LOG_COLUMNS = ("step", "dt", "time", "divergence_iterations", "divergence_error", "density_iterations",
@@ -34,6 +34,7 @@ def init_state(state, scene):
     x = state["particle_x"][:, :scene.dim]
     state["particle_kappa"][:] = scene.hydrostatic_pressure(x) / scene["fluid.rest_density"]
     state["dfsph_control"][CONTROL_MAX_ITERATIONS] = scene["fluid.max_iterations"]
+    state["dfsph_control"][CONTROL_RUNNING] = 1  # (the predicate of the Vulkan host's windows: dfsph.glsl)
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DIVERGENCE] = scene["fluid.max_divergence_error"]
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DENSITY] = scene["fluid.max_density_error"]
 

@@ -305,6 +305,46 @@ def test_resume_is_bitwise_and_the_log_whole(tmp_path, backend):
     assert whole["solver_log"].shape == (24, 8) and (whole["solver_log"][:, 0] == np.arange(1, 25)).all()
 
 
+def test_vulkan_windows_give_the_bits_of_the_whole_budget(monkeypatch):
+    """Vulkan records a window of each solve's iterations at a time, the rest of a submission skipped by
+    conditional rendering once a solve spends its window unconverged, and resumed by the host (dfsph.glsl).
+    With windows of one iteration (a suspension at every update past the first) and with the default
+    sizing, every buffer after 24 steps is bitwise that of the run with the whole budget recorded."""
+    vulkan_or_skip()
+    import sphcore.backends as backends
+    scene = scene_of()
+
+    def run_with(windows):
+        with Simulation(scene, "vulkan", validation=True) as sim:
+            submits = []
+            submit = sim.backend._submit
+            monkeypatch.setattr(sim.backend, "_submit", lambda rec: (submits.append(rec), submit(rec)))
+            if windows is None:
+                sim.backend.windows = None  # the whole budget, recorded
+            assert sim.backend.ctx.conditional_rendering and (windows is None or sim.backend.windows)
+            for _ in range(3):
+                sim.advance(8)
+            assert list(sim.backend.ctx.validation_messages) == []
+            return sim.backend.read(), log_of(sim), len(submits)
+
+    whole, whole_log, _ = run_with(None)
+    dispatched = (whole_log[:, 3] - 1).clip(0).sum() + (whole_log[:, 5] - 1).clip(0).sum()
+    assert dispatched > 24  # solves that need more than one update: windows of one suspend
+    one_log = None
+    for window in (1, None):
+        if window == 1:
+            monkeypatch.setattr(backends, "FIRST_WINDOW", 1)
+            monkeypatch.setattr(backends.VulkanBackend, "next_window", staticmethod(lambda most, budget: 1))
+        else:
+            monkeypatch.undo()
+        state, log, submits = run_with(window or "default")
+        if window == 1:
+            assert submits >= 3 + dispatched  # a resumption for every update past a solve's first
+        assert np.array_equal(log, whole_log)
+        for name in whole:
+            assert np.array_equal(state[name], whole[name]), name
+
+
 def test_state_holds_the_settings():
     scene = scene_of(**{"fluid.max_iterations": 7, "fluid.max_density_error": 2e-3})
     params = scene.params(4)

@@ -27,6 +27,13 @@
 // groups. dfsph_factor sets the counts at the start of every step. The check has no dispatch of its own:
 // an iteration is two dispatches, and a spent one costs two empty dispatches and their barriers (a
 // separate check stage made it three).
+// Windows (the Vulkan host, where the device has conditional rendering): instead of the whole budget the
+// host records a window of W iterations per solve (CONTROL_WINDOW), sized from the last steps' counts, and
+// every dispatch under the predicate CONTROL_RUNNING. A solve still unconverged after a multiple of W
+// updates (and inside its budget) clears CONTROL_RUNNING: the rest of the command buffer is skipped, the
+// host sees it after the submission, records the next W iterations and the rest of that step, sets the
+// predicate and goes on. The same updates run in the same order, so the results are the same bits as
+// with the whole budget recorded (and as the mirror's, which records no window).
 // With V_j = m / rho_0 and V grad_i W_ij = -(pressure_coef / rho_0) kernel_gradient r_hat_ij:
 //   alpha_i = 1 / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2)                     (dfsph_factor)
 //   d_i = sum_j V (v_i - v_j) . grad W_ij, the density ratio's rate                   (dfsph_residual)
@@ -58,6 +65,10 @@ const uint CONTROL_OVERFLOW_STEP = 10u; // the first step (1 = the first) at whi
                                         // MAX_NEIGHBOURS neighbours and images within h; 0: none
 const uint CONTROL_FINISHED = 11u;      // dfsph_residual's work groups finished so far in this dispatch (the
                                         // last one runs the check and resets it to 0)
+const uint CONTROL_RUNNING = 12u;       // 1: the recorded dispatches run; 0 once a solve spent its window (the
+                                        // Vulkan host's predicate of conditional rendering: the rest is skipped)
+const uint CONTROL_WINDOW = 13u;        // [CONTROL_WINDOW + solve]: the iterations the host recorded per window
+                                        // of the solve (0: the whole budget, no window)
 const uint CONTROL_DISPATCH = 16u;      // [dispatch_base(solve)]: the solve's indirect dispatch arguments,
                                         //   (x, y, z) work groups of its dfsph_velocity and dfsph_residual
 const uint CONTROL_SIZE = 32u;

@@ -5,8 +5,9 @@
 // rounding on both backends), is the solve's error (divergence-free: times dt). Once it is under the
 // solve's tolerance after its minimum iterations, or fluid.max_iterations updates are spent, the solve's
 // done flag is set and its indirect dispatches' work groups are zeroed: the rest of its recorded iterations
-// dispatch nothing. A solve stopped unconverged is counted and the first one recorded (step, solve,
-// error). The constant-density solve's stop ends the step: a row of dfsph_history.
+// dispatch nothing. One going on at the end of the host's window of recorded iterations clears the
+// predicate CONTROL_RUNNING (dfsph.glsl: windows). A solve stopped unconverged is counted and the first
+// one recorded (step, solve, error). The constant-density solve's stop ends the step: a row of dfsph_history.
 // Needs time_state, dfsph_control, dfsph_state, dfsph_history, dfsph_partial and the shared s_sum declared
 // by the shader that includes this file (after dfsph.glsl).
 // Mirror: sphcore/sph/dfsph_check.py (same names, same statements).
@@ -30,7 +31,12 @@ void dfsph_check_decide(uint solve) {
     uint iterations = dfsph_control[CONTROL_ITERATIONS + solve];
     uint least = solve == SOLVE_DENSITY ? MIN_ITERATIONS_DENSITY : MIN_ITERATIONS_DIVERGENCE;
     bool converged = iterations >= least && error <= dfsph_state[STATE_TOLERANCE + solve];
-    if (!converged && iterations < dfsph_control[CONTROL_MAX_ITERATIONS]) return;
+    if (!converged && iterations < dfsph_control[CONTROL_MAX_ITERATIONS]) {
+        // going on; at the end of a recorded window, the rest of the command buffer is skipped (dfsph.glsl)
+        uint window = dfsph_control[CONTROL_WINDOW + solve];
+        if (window > 0u && iterations > 0u && iterations % window == 0u) dfsph_control[CONTROL_RUNNING] = 0u;
+        return;
+    }
     dfsph_control[CONTROL_DONE + solve] = 1u;
     dfsph_control[dispatch_base(solve)] = 0u;
     dfsph_state[STATE_ERROR + solve] = error;

@@ -21,6 +21,8 @@ CONTROL_FAILED_SOLVE = 8  # and its solve
 CONTROL_MAX_ITERATIONS = 9  # fluid.max_iterations (host)
 CONTROL_OVERFLOW_STEP = 10  # the first step at which a particle had more than MAX_NEIGHBOURS; 0: none
 CONTROL_FINISHED = 11  # dfsph_residual's work groups finished in this dispatch (the last runs the check, resets it)
+CONTROL_RUNNING = 12  # 1: the recorded dispatches run; 0 once a solve spent its window (conditional rendering)
+CONTROL_WINDOW = 13  # [CONTROL_WINDOW + solve]: the iterations the host recorded per window (0: no window)
 CONTROL_DISPATCH = 16  # [dispatch_base(solve)]: the solve's indirect dispatch arguments, (x, y, z) work
 #                        groups of its dfsph_velocity and dfsph_residual
 CONTROL_SIZE = 32

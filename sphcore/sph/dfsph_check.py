@@ -1,7 +1,8 @@
 """DFSPH's convergence test of solve P.level (dfsph.py), run by the last of dfsph_residual's work groups
 to finish: the mean residual in a fixed order (of the work groups' sums) is the solve's error; under the
 tolerance after the minimum iterations, or with the budget spent, the solve's done flag is set and its
-indirect dispatches' work groups zeroed; an unconverged stop is counted and the first recorded; the
+indirect dispatches' work groups zeroed (going on at the end of a window of recorded iterations, the
+predicate CONTROL_RUNNING cleared); an unconverged stop is counted and the first recorded; the
 constant-density solve's stop writes the step's row of dfsph_history.
 
 Mirror of shaders/sph/dfsph_check.glsl: same names, same statements. dfsph_residual's launch calls
@@ -14,9 +15,10 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES,
-                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_STEP, HISTORY_ROWS,
-                               MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE, SOLVE_DENSITY, SOLVE_DIVERGENCE,
-                               STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE, dispatch_base)
+                               CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_RUNNING, CONTROL_STEP,
+                               CONTROL_WINDOW, HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE,
+                               SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_ERROR, STATE_FAILED_ERROR, STATE_TOLERANCE,
+                               dispatch_base)
 
 f32 = np.float32
 
@@ -49,6 +51,10 @@ def dfsph_check(spec, real=np.float32):
         least = MIN_ITERATIONS_DENSITY if solve == SOLVE_DENSITY else MIN_ITERATIONS_DIVERGENCE
         converged = iterations >= least and error <= dfsph_state[STATE_TOLERANCE + solve]
         if not converged and iterations < dfsph_control[CONTROL_MAX_ITERATIONS]:
+            # going on; at the end of a recorded window, the rest of the command buffer is skipped (dfsph.py)
+            window = dfsph_control[CONTROL_WINDOW + solve]
+            if window > 0 and iterations > 0 and iterations % window == 0:
+                dfsph_control[CONTROL_RUNNING] = 0
             return
         dfsph_control[CONTROL_DONE + solve] = 1
         dfsph_control[dispatch_base(solve)] = 0

@@ -12,6 +12,8 @@ import numpy as np
 WHOLE_SIZE = 0xFFFFFFFFFFFFFFFF
 FENCE_TIMEOUT_NS = 3600 * 10**9
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
+CONDITIONAL_RENDERING = "VK_EXT_conditional_rendering"
+STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for small copies
 
 
 # One VkInstance per process and validation setting, kept until exit: the NVIDIA driver was
@@ -55,6 +57,8 @@ class Buffer:
         self.ctx, self.nbytes, self.name = ctx, max(int(nbytes), 4), name
         usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
                  | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT | vk.VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT)
+        if ctx.conditional_rendering:
+            usage |= vk.VK_BUFFER_USAGE_CONDITIONAL_RENDERING_BIT_EXT
         self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, name)
 
     def write(self, array):
@@ -69,7 +73,7 @@ class Buffer:
             staging = self.ctx._staging(data.nbytes)
             self.ctx._write_mapped(staging.memory, data)
             self.ctx._copy(staging.buffer, self.buffer, data.nbytes)
-            staging.free()
+            self.ctx._release(staging)
 
     def read(self, dtype, shape):
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
@@ -80,7 +84,7 @@ class Buffer:
         staging = self.ctx._staging(nbytes)
         self.ctx._copy(self.buffer, staging.buffer, nbytes)
         out = self.ctx._read_mapped(staging.memory, nbytes).view(dtype).reshape(shape)
-        staging.free()
+        self.ctx._release(staging)
         return out
 
     def free(self):
@@ -159,17 +163,30 @@ class Pipeline:
 
 
 class Recording:
-    """Commands recorded into one primary command buffer; `Context.submit` runs it."""
+    """Commands recorded into one primary command buffer, which `Context.submit` runs; or with `secondary`,
+    into a secondary one, which primaries run (`execute`), as often as they like."""
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, secondary=False):
         vk = ctx.vk
         self.ctx = ctx
+        level = vk.VK_COMMAND_BUFFER_LEVEL_SECONDARY if secondary else vk.VK_COMMAND_BUFFER_LEVEL_PRIMARY
         self.command_buffer = vk.vkAllocateCommandBuffers(ctx.device, vk.VkCommandBufferAllocateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, commandPool=ctx.command_pool,
-            level=vk.VK_COMMAND_BUFFER_LEVEL_PRIMARY, commandBufferCount=1))[0]
-        vk.vkBeginCommandBuffer(self.command_buffer, vk.VkCommandBufferBeginInfo(
-            sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO))
+            level=level, commandBufferCount=1))[0]
+        begin = vk.VkCommandBufferBeginInfo(sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO)
+        if secondary:  # (several times in one primary: simultaneous use)
+            begin = vk.VkCommandBufferBeginInfo(
+                sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO, flags=vk.VK_COMMAND_BUFFER_USAGE_SIMULTANEOUS_USE_BIT,
+                pInheritanceInfo=vk.VkCommandBufferInheritanceInfo(
+                    sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_INHERITANCE_INFO))
+        vk.vkBeginCommandBuffer(self.command_buffer, begin)
         self._keep = []
+
+    def execute(self, recordings):
+        """Run the finished secondary `recordings`, in order."""
+        self._keep.append(recordings)
+        self.ctx.vk.vkCmdExecuteCommands(self.command_buffer, len(recordings),
+                                         [r.command_buffer for r in recordings])
 
     def _bind(self, pipeline, push):
         vk, cb = self.ctx.vk, self.command_buffer
@@ -181,19 +198,36 @@ class Recording:
         vk.vkCmdPushConstants(cb, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, data.nbytes,
                               vk.ffi.from_buffer(data))
 
-    def dispatch(self, pipeline, push, n_invocations=None, groups=None):
+    def dispatch(self, pipeline, push, n_invocations=None, groups=None, predicate=None):
         """Bind `pipeline`, push the bytes of `push` and dispatch enough groups for n invocations
-        (or `groups`, an (x, y, z) triple)."""
+        (or `groups`, an (x, y, z) triple); with `predicate`, a (buffer, byte offset), only where the
+        32-bit word there is not 0 when the dispatch runs (conditional rendering)."""
         self._bind(pipeline, push)
         if groups is None:
             groups = ((int(n_invocations) + pipeline.local_size - 1) // pipeline.local_size, 1, 1)
         if min(groups) > 0:
+            self._begin(predicate)
             self.ctx.vk.vkCmdDispatch(self.command_buffer, *(int(g) for g in groups))
+            self._end(predicate)
 
-    def dispatch_indirect(self, pipeline, push, buffer, offset=0):
-        """Dispatch with the (x, y, z) group counts that `buffer` holds at byte `offset` when it runs."""
+    def dispatch_indirect(self, pipeline, push, buffer, offset=0, predicate=None):
+        """Dispatch with the (x, y, z) group counts that `buffer` holds at byte `offset` when it runs
+        (`predicate`: as dispatch's)."""
         self._bind(pipeline, push)
+        self._begin(predicate)
         self.ctx.vk.vkCmdDispatchIndirect(self.command_buffer, buffer.buffer, offset)
+        self._end(predicate)
+
+    def _begin(self, predicate):
+        if predicate is not None:
+            vk = self.ctx.vk
+            buffer, offset = predicate
+            self.ctx.cmd_begin_conditional(self.command_buffer, vk.VkConditionalRenderingBeginInfoEXT(
+                sType=vk.VK_STRUCTURE_TYPE_CONDITIONAL_RENDERING_BEGIN_INFO_EXT, buffer=buffer.buffer, offset=offset))
+
+    def _end(self, predicate):
+        if predicate is not None:
+            self.ctx.cmd_end_conditional(self.command_buffer)
 
     def fill(self, buffer, value=0):
         """Set every 32-bit word of `buffer` to `value`."""
@@ -206,14 +240,17 @@ class Recording:
                                 vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, [barrier], 0, None, 0, None)
 
     def barrier(self):
-        """Make every shader write so far visible to every later shader read and write."""
+        """Make every shader write so far visible to every later shader read and write, indirect
+        dispatch and predicate."""
         vk = self.ctx.vk
-        barrier = vk.VkMemoryBarrier(
-            sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER, srcAccessMask=vk.VK_ACCESS_SHADER_WRITE_BIT,
-            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT
-            | vk.VK_ACCESS_INDIRECT_COMMAND_READ_BIT)
-        vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                                vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT,
+        access = vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_INDIRECT_COMMAND_READ_BIT
+        stages = vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT
+        if self.ctx.conditional_rendering:
+            access |= vk.VK_ACCESS_CONDITIONAL_RENDERING_READ_BIT_EXT
+            stages |= vk.VK_PIPELINE_STAGE_CONDITIONAL_RENDERING_BIT_EXT
+        barrier = vk.VkMemoryBarrier(sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+                                     srcAccessMask=vk.VK_ACCESS_SHADER_WRITE_BIT, dstAccessMask=access)
+        vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, stages,
                                 0, 1, [barrier], 0, None, 0, None)
 
     def timestamp(self, timer, index):
@@ -304,15 +341,29 @@ class Context:
             sType=vk.VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO, queueFamilyIndex=self.queue_family,
             queueCount=1, pQueuePriorities=[1.0])
         features = vk.VkPhysicalDeviceFeatures(shaderFloat64=self.shader_float64)
+        # conditional rendering, where the device has it: dispatches skipped by a word in a buffer (the
+        # DFSPH host's windows, sphcore.backends.VulkanBackend)
+        extensions = {_text(e.extensionName) for e in vk.vkEnumerateDeviceExtensionProperties(self.physical_device, None)}
+        self.conditional_rendering = CONDITIONAL_RENDERING in extensions
+        enabled, chain = [], vk.ffi.NULL
+        if self.conditional_rendering:
+            enabled = [CONDITIONAL_RENDERING]
+            chain = vk.VkPhysicalDeviceConditionalRenderingFeaturesEXT(
+                sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_CONDITIONAL_RENDERING_FEATURES_EXT, conditionalRendering=1)
         self.device = vk.vkCreateDevice(self.physical_device, vk.VkDeviceCreateInfo(
-            sType=vk.VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO, queueCreateInfoCount=1,
-            pQueueCreateInfos=[queue_info], pEnabledFeatures=features), None)
+            sType=vk.VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO, pNext=chain, queueCreateInfoCount=1,
+            pQueueCreateInfos=[queue_info], enabledExtensionCount=len(enabled), ppEnabledExtensionNames=enabled,
+            pEnabledFeatures=features), None)
+        if self.conditional_rendering:
+            self.cmd_begin_conditional = vk.vkGetDeviceProcAddr(self.device, "vkCmdBeginConditionalRenderingEXT")
+            self.cmd_end_conditional = vk.vkGetDeviceProcAddr(self.device, "vkCmdEndConditionalRenderingEXT")
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
             flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT), None)
         self.fence = vk.vkCreateFence(self.device, vk.VkFenceCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None)
+        self._kept_staging = None  # (_staging)
 
     # ---- instance and device ----
     def _create_instance(self, validation):
@@ -446,7 +497,18 @@ class Context:
         return out
 
     def _staging(self, nbytes):
-        return _Staging(self, nbytes)
+        """Host-visible memory for a copy of `nbytes`; up to STAGING_KEPT bytes, one buffer kept for every such
+        copy (allocating memory took about 2 ms a copy on an NVIDIA driver, and the DFSPH host reads
+        its control words after every submission)."""
+        if nbytes > STAGING_KEPT:
+            return _Staging(self, nbytes)
+        if self._kept_staging is None:
+            self._kept_staging = _Staging(self, STAGING_KEPT)
+        return self._kept_staging
+
+    def _release(self, staging):
+        if staging is not self._kept_staging:
+            staging.free()
 
     def _copy(self, src, dst, nbytes):
         rec = Recording(self)
@@ -462,8 +524,8 @@ class Context:
     def pipeline(self, spirv, n_bindings, push_size, local_size=128, spec_values=()):
         return Pipeline(self, spirv, n_bindings, push_size, local_size, spec_values)
 
-    def record(self):
-        return Recording(self)
+    def record(self, secondary=False):
+        return Recording(self, secondary)
 
     def timer(self, slots):
         return Timer(self, slots)
@@ -498,6 +560,8 @@ class Context:
             vk.vkDeviceWaitIdle(self.device)
         except vk.VkErrorDeviceLost:
             pass  # nothing runs on a lost device any more; its objects are destroyed all the same
+        if self._kept_staging is not None:
+            self._kept_staging.free()
         vk.vkDestroyFence(self.device, self.fence, None)
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
