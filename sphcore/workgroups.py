@@ -20,6 +20,9 @@ A launch keeps its compiled code on disk across runs, one entry per set of closu
 (sphcore/numba_cache.py); a stage that writes its own launch returns `cached(launch)`, which also
 compiles its body and helpers without reference counting: a body must not allocate (no array
 slices: copy a vec4 component by component), only the launch may (a work group's shared memory).
+`launcher`'s own launches allocate nothing, so they are compiled without it too: with it, each
+invocation's call of the body counted each of its arrays up and down, atomically (13 arrays in
+compute_density: 9.0 against 7.8 ms at 64,000 particles on 2 cores).
 """
 from numba import njit, prange
 
@@ -28,14 +31,15 @@ from sphcore.numba_cache import cached
 
 def launcher(main, parallel=True):
     if parallel:
-        @njit(parallel=True, error_model="numpy")  # x / 0 gives inf or NaN, as in GLSL, not ZeroDivisionError
+        # (error_model: x / 0 gives inf or NaN, as in GLSL, not ZeroDivisionError)
+        @njit(parallel=True, error_model="numpy", _nrt=False)
         def launch(n_groups, local_size, *args):
             for group in prange(n_groups):
                 for lid in range(local_size):
                     gid = group * local_size + lid
                     main(gid, *args)
     else:
-        @njit(error_model="numpy")
+        @njit(error_model="numpy", _nrt=False)
         def launch(n_groups, local_size, *args):
             for group in range(n_groups):
                 for lid in range(local_size):

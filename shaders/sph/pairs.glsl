@@ -9,7 +9,10 @@
 // obstacles.glsl: near_obstacles), two particles along x, antisymmetrically in (i, j). The usual case
 // returns first (on the CPU the coincident cases' tests cost a third of a list sweep otherwise).
 real3 pair_direction(real3 r, real rlen, uint i, uint j, uint image, real3 inward) {
-    if (rlen > real(0.0)) return r / rlen;
+    if (rlen > real(0.0)) {
+        real inv = real(1.0) / rlen;  // (one division and three products: on the CPU a tenth of compute_forces)
+        return r * inv;
+    }
     real3 r_hat = real3(i < j ? -1.0 : 1.0, 0.0, 0.0);
     if ((image & 1u) != 0u) r_hat = real3(inward.x, 0.0, 0.0);
     if ((image & 2u) != 0u) r_hat = real3(0.0, inward.y, 0.0);
