@@ -76,6 +76,7 @@ BUFFERS = {
     "dfsph_partial": (REAL, 1, "particles"),
     "dfsph_neighbours": (np.uint32, 1, "neighbours"),
     "dfsph_neighbour_count": (np.uint32, 1, "particles"),
+    "dfsph_gradients": (REAL, 4, "gradients"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -83,6 +84,9 @@ BUFFERS = {
 # dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
 # dfsph_neighbours, dfsph_neighbour_count: each particle's neighbour list for the solves' sweeps, written by
 # dfsph_factor (spec.MAX_NEIGHBOURS slots a particle: "neighbours" is n times that, at least 1 word);
+# dfsph_gradients: with spec.GRADIENTS (DFSPH on numba), each list entry's V grad_i W, which dfsph_factor
+# writes in the list's layout: a pair's distance, direction and kernel are computed once a step, not in every
+# sweep ("gradients" is n times spec.MAX_NEIGHBOURS then, else 1).
 # dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
@@ -123,15 +127,16 @@ STAGES = {
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
                                                  "dfsph_control", "particle_kappa", "dfsph_neighbours",
-                                                 "dfsph_neighbour_count")),
+                                                 "dfsph_neighbour_count", "dfsph_gradients")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "obstacle_box", "time_state", "particle_residual",
                                                      "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count",
-                                                     "dfsph_control", "dfsph_state", "dfsph_history")),
+                                                     "dfsph_gradients", "dfsph_control", "dfsph_state",
+                                                     "dfsph_history")),
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "obstacle_box", "time_state", "particle_alpha",
                                                      "particle_residual", "dfsph_control", "particle_kappa",
-                                                     "dfsph_neighbours", "dfsph_neighbour_count")),
+                                                     "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_gradients")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
                                            "time_state")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
@@ -196,13 +201,15 @@ def buffer_dtype(name, precision="float32"):
     return np.dtype(precision if dtype == REAL else dtype)
 
 
-def buffer_length(length, params, max_neighbours=0):
-    """Elements of a buffer of BUFFERS' `length` for the parameter block `params` (and DFSPH's
-    spec.MAX_NEIGHBOURS list slots a particle)."""
+def buffer_length(length, params, max_neighbours=0, gradients=False):
+    """Elements of a buffer of BUFFERS' `length` for the parameter block `params` (and the
+    spec.MAX_NEIGHBOURS list slots a particle; `gradients`: DFSPH stores their gradients, spec.GRADIENTS)."""
     if length == "particles":
         return int(params[0]["n"])
     if length == "neighbours":
         return max(1, int(params[0]["n"]) * max_neighbours)
+    if length == "gradients":
+        return max(1, int(params[0]["n"]) * max_neighbours) if gradients else 1
     if length == "cells":
         return int(params[0]["cell_total"])
     if length == "pyramid":
@@ -210,16 +217,17 @@ def buffer_length(length, params, max_neighbours=0):
     return length
 
 
-def empty_state(params, precision="float32", obstacles=(), max_neighbours=0):
+def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gradients=False):
     """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`,
-    DFSPH's neighbour lists of `max_neighbours` slots a particle (a scene's spec.MAX_NEIGHBOURS),
+    neighbour lists of `max_neighbours` slots a particle (a scene's spec.MAX_NEIGHBOURS; with `gradients`,
+    spec.GRADIENTS, also room for DFSPH's gradient of each entry),
     and the box `obstacles` ([{"min": [...], "max": [...]}], a scene's domain.obstacles) in obstacle_box.
     A box's face that lies on a wall is no face: the box is continued through the wall by the tank's
     size (a box on the floor reaches below it), so that no particle slides between the two on the
     wall, and none inside the box is put back out through the wall (integrate.comp)."""
     state = {}
     for name, (_, c, length) in BUFFERS.items():
-        k = buffer_length(length, params, max_neighbours)
+        k = buffer_length(length, params, max_neighbours, gradients)
         state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
@@ -255,6 +263,9 @@ def check_neighbours(state, spec):
     if len(state["dfsph_neighbours"]) < n * spec.MAX_NEIGHBOURS:
         raise ValueError(f"the plan's neighbour lists need {n} x {spec.MAX_NEIGHBOURS} words but dfsph_neighbours "
                          f"holds {len(state['dfsph_neighbours'])}: pass the scene's spec.MAX_NEIGHBOURS to empty_state")
+    if spec.GRADIENTS and len(state["dfsph_gradients"]) < n * spec.MAX_NEIGHBOURS:
+        raise ValueError(f"DFSPH's pair gradients need {n} x {spec.MAX_NEIGHBOURS} entries but dfsph_gradients holds "
+                         f"{len(state['dfsph_gradients'])}: pass the spec's GRADIENTS to empty_state")
     if spec.MAX_NEIGHBOURS > 0 and (n > NEIGHBOUR_MASK or n * spec.MAX_NEIGHBOURS >= 2 ** 32):
         raise ValueError(f"{n} particles with {spec.MAX_NEIGHBOURS} neighbour slots each: the neighbour lists "
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")

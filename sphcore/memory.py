@@ -43,10 +43,10 @@ def particle_count(scene):
     return int(sum(np.prod(scene._lattice_shape(b)) for b in scene["fluid.blocks"]))
 
 
-def buffer_bytes(params, precision, max_neighbours=0):
+def buffer_bytes(params, precision, max_neighbours=0, gradients=False):
     """name -> bytes of every buffer of sphcore.backends.BUFFERS for the parameter block `params` (and
-    DFSPH's `max_neighbours` list slots a particle)."""
-    return {name: buffer_length(length, params, max_neighbours) * c * buffer_dtype(name, precision).itemsize
+    `max_neighbours` list slots a particle; `gradients`: with DFSPH's gradient of each, spec.GRADIENTS)."""
+    return {name: buffer_length(length, params, max_neighbours, gradients) * c * buffer_dtype(name, precision).itemsize
             for name, (_, c, length) in BUFFERS.items()}
 
 
@@ -58,7 +58,8 @@ def estimate(scene, backend="numba", device_in_host=None, n=None):
 
     n = particle_count(scene) if n is None else n
     precision = scene["physics.precision"]
-    sizes = buffer_bytes(scene.params(n), precision, scene.spec_for(backend).MAX_NEIGHBOURS)
+    spec = scene.spec_for(backend)
+    sizes = buffer_bytes(scene.params(n), precision, spec.MAX_NEIGHBOURS, spec.GRADIENTS)
     state = sum(sizes.values())
     carried = sum(sizes[name] for name in CARRIED if name in sizes)
     ordered = sum(size for name, size in sizes.items()

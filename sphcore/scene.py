@@ -73,6 +73,10 @@ def stable_dt(scene, max_speed=0.0):
 # spec_for: the most list slots (4 bytes each) a backend gets for the state equation: 1 GiB of host memory on
 # numba, a 4 GiB buffer on Vulkan (its largest storage buffer)
 LIST_WORDS = {"numba": 1 << 28, "vulkan": (1 << 30) - 1}
+# DFSPH's stored pair gradients (spec.GRADIENTS: 16 bytes a list slot) where they fit in this many slots: numba
+# only, whose sweeps were bound by computing each pair again (9,600 particles, 2 cores: 11.8 -> 10.3 ms a
+# step); on the H200 reading them was slower than computing them (1 M particles: 4.17 -> 4.37 ms)
+GRADIENT_SLOTS = {"numba": 1 << 26}
 
 class SceneError(ValueError):
     """A scene that cannot be run; the message names the file and the key."""
@@ -585,12 +589,15 @@ class Scene:
         order, so the same bits (a particle with more neighbours than the list's slots is scanned as
         before). Measured, 3D, h = 2 dx: numba 1.67x faster at 64,000 particles, the H200 1.13x at 1 M
         and 1.12x at 8 M. Lists of more than LIST_WORDS[backend] words in all (a large scene, or a large
-        fluid.smoothing_ratio) are left out: the scan needs no memory."""
+        fluid.smoothing_ratio) are left out: the scan needs no memory. Under DFSPH on numba, where they fit
+        (GRADIENT_SLOTS), dfsph_factor also stores each list entry's gradient for the sweeps (GRADIENTS)."""
         from sphcore.memory import particle_count
 
         spec = self.spec
         if not spec.DFSPH and particle_count(self) * self.max_neighbours <= LIST_WORDS.get(backend, 0):
             spec = spec._replace(MAX_NEIGHBOURS=self.max_neighbours)
+        if spec.DFSPH and particle_count(self) * spec.MAX_NEIGHBOURS <= GRADIENT_SLOTS.get(backend, 0):
+            spec = spec._replace(GRADIENTS=True)  # (the same bits: dfsph_factor stores what the sweeps compute)
         return spec
 
     def params(self, n):

@@ -73,7 +73,7 @@ class Simulation:
         self.params = scene.params(self.n)
         self.spec = scene.spec_for(backend)  # (neighbour lists with the state equation too, where they fit)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
-                            self.spec.MAX_NEIGHBOURS)
+                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS)
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
         if scene.dfsph:

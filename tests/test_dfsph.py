@@ -91,6 +91,9 @@ def test_solver_stages_agree_and_count_the_same_iterations():
             a, b = cpu.backend.read(), gpu.backend.read()
             # the residual rho / rho_0 + dt d - 1 cancels to a few float32 ulps of 1, not of itself
             gap = np.abs(a.pop("particle_residual") - b.pop("particle_residual")).max()
+            # numba stores the pair gradients (spec.GRADIENTS), Vulkan computes them again in each sweep
+            assert cpu.spec.GRADIENTS and not gpu.spec.GRADIENTS and len(b.pop("dfsph_gradients")) == 1
+            a.pop("dfsph_gradients")
             assert gap <= 8 * np.finfo(np.float32).eps, f"after {stage}: particle_residual differs by {gap:g}"
             assert_stage_agrees(a, b, stage, STAGE_RTOL)
             if stage.name == "dfsph_factor":  # the step starts both solves' indirect dispatches
@@ -343,6 +346,38 @@ def test_vulkan_windows_give_the_bits_of_the_whole_budget(monkeypatch):
         assert np.array_equal(log, whole_log)
         for name in whole:
             assert np.array_equal(state[name], whole[name]), name
+
+
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_stored_pair_gradients_give_the_bits_of_computed_ones(backend, monkeypatch):
+    """With spec.GRADIENTS (numba's default, Scene.spec_for) dfsph_factor stores each list entry's V grad W and
+    the sweeps read it; without, they compute it again as the factor did. 12 steps either way: every buffer
+    bitwise the same, and the stored gradients are those of the list's pairs (sum and |g|^2 give alpha)."""
+    if backend == "vulkan":
+        vulkan_or_skip()
+    import sphcore.scene
+    scene = scene_of()
+    runs = {}
+    for stored in (True, False):
+        monkeypatch.setattr(sphcore.scene, "GRADIENT_SLOTS", {backend: 1 << 26} if stored else {})
+        with Simulation(scene, backend) as sim:
+            assert sim.spec.GRADIENTS == stored
+            sim.advance(12)
+            runs[stored] = sim.backend.read(), log_of(sim)
+    (a, log_a), (b, log_b) = runs[True], runs[False]
+    assert np.array_equal(log_a, log_b) and (log_a[:, 5] >= 2).all()
+    for name in a:
+        if name != "dfsph_gradients":
+            assert np.array_equal(a[name], b[name]), name
+    # the stored entries: alpha_i = 1 / (|sum_j g|^2 + sum_j |g|^2) over each particle's list
+    n, slots = len(a["particle_id"]), scene.spec_for(backend).MAX_NEIGHBOURS
+    g = a["dfsph_gradients"].reshape(slots, n, 4)[:, :, :3].astype(np.float64)
+    used = np.arange(slots)[:, None] < np.minimum(a["dfsph_neighbour_count"], slots)[None, :]
+    g[~used] = 0.0
+    s = (g.sum(axis=0) ** 2).sum(axis=1) + (g ** 2).sum(axis=(0, 2))
+    alone = s <= 1e-6 / scene.h ** 2
+    assert np.allclose(a["particle_alpha"][~alone], 1.0 / s[~alone], rtol=1e-4)
+    assert not alone.all() and (a["dfsph_gradients"][:, 3] == 0).all()
 
 
 def test_state_holds_the_settings():

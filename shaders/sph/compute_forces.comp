@@ -30,6 +30,8 @@ layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; }
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };  // (unread: named by
+                                                                                           // neighbour_list.glsl)
 #include "neighbour_list.glsl"
 
 void main() {

@@ -30,3 +30,6 @@ layout(constant_id = 19) const bool DFSPH = false;        // physics.pressure_so
                                                           // for the pressure; compute_forces adds no pressure term
 layout(constant_id = 20) const uint MAX_NEIGHBOURS = 0;   // DFSPH: slots per particle of its neighbour list
                                                           // (dfsph.glsl; fluid.max_neighbours)
+layout(constant_id = 21) const bool GRADIENTS = false;    // DFSPH: dfsph_factor stores each list entry's
+                                                          // V grad W for the sweeps (Scene.spec_for: numba),
+                                                          // else they compute it again (the same bits)

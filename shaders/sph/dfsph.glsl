@@ -16,6 +16,9 @@
 // words), their number in dfsph_neighbour_count[i]. dfsph_factor, every sweep of the solves and
 // compute_forces walk that list (neighbour_list.glsl: listed_pair): the sums
 // run in the scan's order, with the same terms, over about a third (2D) or a seventh (3D) of the candidates.
+// The sweeps use each entry's g = V grad_i W_ij as dfsph_factor computes it (listed_gradient): with the
+// specialization constant GRADIENTS (numba) the factor stores it in dfsph_gradients[slot * n + i] and the
+// sweeps read it; else they compute it again. The same bits either way.
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
 // (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level
 // (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order

@@ -5,8 +5,9 @@
 // solves (dfsph.glsl): invocation 0 clears their done flags and iteration counts and sets their indirect
 // dispatches' work groups (one invocation per particle); every particle's
 // pressure is cleared and its stiffness sum scaled to the warm start (WARM_START). The sums walk the
-// particle's neighbour list, which compute_density's scan wrote and every sweep of the solves walks too
-// (dfsph.glsl).
+// particle's neighbour list, which compute_density's scan wrote; with GRADIENTS they store each entry's
+// V grad W_ij (dfsph_gradients) for the solves' sweeps, which then read it instead of computing the pair
+// again (dfsph.glsl).
 // Mirror: sphcore/sph/dfsph_factor.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -28,6 +29,7 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+layout(std430, binding = 31) writeonly buffer DfsphGradients { real4 dfsph_gradients[]; };
 #include "neighbour_list.glsl"
 
 void main() {
@@ -54,7 +56,8 @@ void main() {
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [3] sums over the particle's list (compute_density wrote it this step, in its scan's order: every
     //     other particle and every image within h) of g = V grad_i W_ij = -coef kernel_gradient r_hat
-    //     (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2
+    //     (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; with GRADIENTS each g stored for
+    //     the solves' sweeps (the positions do not move before integrate)
     real coef = real(P.pressure_coef) / real(P.rest_density);
     real3 sum_grad = real3(0.0);
     real sum_grad2 = real(0.0);
@@ -68,8 +71,10 @@ void main() {
         real rlen;
         real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
         real g = coef * pair_gradient(r2, rlen, image);
-        sum_grad -= g * r_hat;
+        real3 grad = g * r_hat;
+        sum_grad -= grad;
         sum_grad2 += g * g;
+        if (GRADIENTS) dfsph_gradients[slot * P.n + i] = real4(-grad, 0.0);
     }
     // [5] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
     real s = sum_grad.x * sum_grad.x + sum_grad.y * sum_grad.y + sum_grad.z * sum_grad.z + sum_grad2;

@@ -38,6 +38,7 @@ layout(std430, binding = 26) writeonly buffer DfsphHistory { float dfsph_history
 layout(std430, binding = 28) coherent buffer DfsphPartial { real dfsph_partial[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };
 #include "neighbour_list.glsl"
 
 shared real s_residual[gl_WorkGroupSize.x];
@@ -64,27 +65,22 @@ void main() {
         real3 inward;
         mirrored = near_obstacles(xi, mirrored, wall, inward);
         // [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
-        real coef = real(P.pressure_coef) / real(P.rest_density);
         real d = real(0.0);
         uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
         for (uint slot = 0u; slot < count; ++slot) {
-            // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
-            //     direction from it to i (neighbour_list.glsl)
+            // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
+            //     g = V grad_i W_ik (neighbour_list.glsl)
             uint j;
             uint image;
-            real3 r;
-            real r2;
-            real rlen;
-            real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
+            real3 g = listed_gradient(i, slot, xi, wall, inward, j, image);
             // [6] the neighbour's velocity; an image's mirrored on the flipped axes
             real3 vk = particle_v[j].xyz + kick * particle_a[j].xyz;
             if (image != 0u) {
                 vk = real3((image & 1u) != 0u ? -vk.x : vk.x, (image & 2u) != 0u ? -vk.y : vk.y,
                            (image & 4u) != 0u ? -vk.z : vk.z);
             }
-            real v_r = (vi.x - vk.x) * r_hat.x + (vi.y - vk.y) * r_hat.y + (vi.z - vk.z) * r_hat.z;
-            // [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-            d -= coef * pair_gradient(r2, rlen, image) * v_r;
+            // [7] V (v_i - v_k) . grad_i W_ik
+            d += (vi.x - vk.x) * g.x + (vi.y - vk.y) * g.y + (vi.z - vk.z) * g.z;
         }
         // [8] the residual: compression only
         residual = max(d, real(0.0));

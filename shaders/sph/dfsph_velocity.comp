@@ -34,6 +34,7 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };
 #include "neighbour_list.glsl"
 
 void main() {
@@ -57,23 +58,18 @@ void main() {
     real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
-    real coef = real(P.pressure_coef) / real(P.rest_density);
     real3 change = real3(0.0);
     uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
     for (uint slot = 0u; slot < count; ++slot) {
-        // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
-        //     direction from it to i (neighbour_list.glsl)
+        // [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
         uint j;
         uint image;
-        real3 r;
-        real r2;
-        real rlen;
-        real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
-        // [6] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
-        //     compressed neighbourhood
+        real3 g = listed_gradient(i, slot, xi, wall, inward, j, image);
+        // [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];
         if (warm) sj = particle_residual[j] > real(0.0) ? particle_kappa[j] : real(0.0);
-        change += (coef * pair_gradient(r2, rlen, image) * (si + sj)) * r_hat;
+        real t = si + sj;
+        change -= t * g;
     }
     // [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
     //     (constant density; only the warm start reads the sum of others, and it writes none)

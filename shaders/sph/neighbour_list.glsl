@@ -1,6 +1,7 @@
 // The neighbour lists (dfsph.glsl: written by compute_density's scan), walked by compute_forces, and under
-// DFSPH by dfsph_factor, dfsph_residual and dfsph_velocity. Needs particle_x and dfsph_neighbours declared
-// by the shader that includes this file (after cells.glsl, pairs.glsl and dfsph.glsl).
+// DFSPH by dfsph_factor (which stores each entry's gradient), dfsph_residual and dfsph_velocity (which read
+// them). Needs particle_x, dfsph_neighbours and dfsph_gradients declared by the shader that includes this
+// file (after cells.glsl, kernels.glsl, pairs.glsl and dfsph.glsl).
 // Mirror: sphcore/sph/neighbour_list.py (same names, same statements).
 
 // Entry `slot` of particle i's list: its neighbour j, or j's image across the walls and obstacle faces
@@ -17,4 +18,23 @@ real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uin
     r2 = r.x * r.x + r.y * r.y + r.z * r.z;
     rlen = sqrt(r2);
     return pair_direction(r, rlen, i, j, image, inward);
+}
+
+// Entry `slot` of particle i's list under DFSPH: its neighbour j (`image`: the walls it is mirrored across);
+// returns g = V grad_i W_ik. With GRADIENTS, as dfsph_factor stored it this step (dfsph_gradients, in the
+// list's layout); else computed again as dfsph_factor computed it: the same bits.
+real3 listed_gradient(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uint j, out uint image) {
+    if (GRADIENTS) {
+        uint k = slot * P.n + i;
+        uint pair = dfsph_neighbours[k];
+        j = pair & NEIGHBOUR_MASK;
+        image = pair >> IMAGE_SHIFT;
+        return dfsph_gradients[k].xyz;
+    }
+    real3 r;
+    real r2;
+    real rlen;
+    real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
+    real g = real(P.pressure_coef) / real(P.rest_density) * pair_gradient(r2, rlen, image);
+    return -(g * r_hat);
 }

@@ -37,7 +37,7 @@ def compute_forces(spec, real=np.float32):
     viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
-    listed_pair = neighbour_list(spec, real)
+    listed_pair = neighbour_list(spec, real)[0]
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,

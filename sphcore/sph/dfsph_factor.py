@@ -24,13 +24,14 @@ from sphcore.sph.obstacles import obstacles
 def dfsph_factor(spec, real=np.float32):
     near_walls = cells(spec, real)[2]
     near_obstacles = obstacles(spec, real)[0]
-    MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
+    MAX_NEIGHBOURS, GRADIENTS = spec.MAX_NEIGHBOURS, spec.GRADIENTS
     pair_gradient = kernels(spec, real)[2]
-    listed_pair = neighbour_list(spec, real)
+    listed_pair = neighbour_list(spec, real)[0]
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,
-                          particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count):
+                          particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
+                          dfsph_gradients):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
         if i >= P.n:
@@ -54,7 +55,8 @@ def dfsph_factor(spec, real=np.float32):
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [3] sums over the particle's list (compute_density wrote it this step, in its scan's order: every
         #     other particle and every image within h) of g = V grad_i W_ij = -coef kernel_gradient r_hat
-        #     (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2
+        #     (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; with GRADIENTS each g stored for
+        #     the solves' sweeps (the positions do not move before integrate)
         coef = real(P.pressure_coef) / real(P.rest_density)
         sum_grad_x = real(0.0)
         sum_grad_y = real(0.0)
@@ -67,10 +69,19 @@ def dfsph_factor(spec, real=np.float32):
                 P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
                 inward_z)
             g = coef * pair_gradient(P, r2, rlen, image)
-            sum_grad_x -= g * r_hat_x
-            sum_grad_y -= g * r_hat_y
-            sum_grad_z -= g * r_hat_z
+            grad_x = g * r_hat_x
+            grad_y = g * r_hat_y
+            grad_z = g * r_hat_z
+            sum_grad_x -= grad_x
+            sum_grad_y -= grad_y
+            sum_grad_z -= grad_z
             sum_grad2 += g * g
+            if GRADIENTS:
+                k = slot * P.n + i
+                dfsph_gradients[k, 0] = -grad_x
+                dfsph_gradients[k, 1] = -grad_y
+                dfsph_gradients[k, 2] = -grad_z
+                dfsph_gradients[k, 3] = real(0.0)
         # [5] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
         s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
         alpha = real(0.0)
@@ -88,11 +99,11 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_p, obstacle_box,
-               particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count):
+               particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
         for group in prange(n_groups):
             for lid in range(local_size):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, obstacle_box,
                                   particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours,
-                                  dfsph_neighbour_count)
+                                  dfsph_neighbour_count, dfsph_gradients)
 
     return cached(launch)

@@ -1,5 +1,6 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
-rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor); divergence-free solve
+rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, with the gradients dfsph_factor stored
+(dfsph_gradients); divergence-free solve
 r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a;
 each work group's residuals summed in order into dfsph_partial; the last work group to finish runs the
 solve's convergence test (dfsph_check). Dispatched indirectly: no work groups once the solve has stopped.
@@ -21,7 +22,6 @@ from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import SOLVE_DENSITY
 from sphcore.sph.dfsph_check import dfsph_check
-from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 
@@ -29,15 +29,14 @@ from sphcore.sph.obstacles import obstacles
 @lru_cache(maxsize=None)
 def dfsph_residual(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
-    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
-    near_obstacles, solid = obstacles(spec, real)
-    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
-    listed_pair = neighbour_list(spec, real)
+    near_walls = cells(spec, real)[2]
+    near_obstacles = obstacles(spec, real)[0]
+    listed_gradient = neighbour_list(spec, real)[1]
     dfsph_check_share, dfsph_check_decide = dfsph_check(spec, real)
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
-                            particle_residual, dfsph_neighbours, dfsph_neighbour_count):
+                            particle_residual, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
         #     invocation of the group reaches the barrier, with a residual of 0 past the last particle
@@ -59,15 +58,13 @@ def dfsph_residual(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
-        coef = real(P.pressure_coef) / real(P.rest_density)
         d = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
-            # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
-            #     direction from it to i (neighbour_list.glsl)
-            j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
-                inward_z)
+            # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
+            #     g = V grad_i W_ik (neighbour_list.glsl)
+            j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot, xi_x,
+                                                      xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z)
             # [6] the neighbour's velocity; an image's mirrored on the flipped axes
             vk_x = particle_v[j, 0] + kick * particle_a[j, 0]
             vk_y = particle_v[j, 1] + kick * particle_a[j, 1]
@@ -76,9 +73,8 @@ def dfsph_residual(spec, real=np.float32):
                 vk_x = -vk_x if (image & 1) != 0 else vk_x
                 vk_y = -vk_y if (image & 2) != 0 else vk_y
                 vk_z = -vk_z if (image & 4) != 0 else vk_z
-            v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
-            # [7] V (v_i - v_k) . grad_i W_ik = -coef kernel_gradient v_ik . r_hat
-            d -= coef * pair_gradient(P, r2, rlen, image) * v_r
+            # [7] V (v_i - v_k) . grad_i W_ik
+            d += (vi_x - vk_x) * g_x + (vi_y - vk_y) * g_y + (vi_z - vk_z) * g_z
         # [8] the residual: compression only
         residual = max(d, real(0.0))
         if solve == SOLVE_DENSITY:
@@ -99,15 +95,16 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
-               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_control, dfsph_state,
-               dfsph_history):
+               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
+               dfsph_control, dfsph_state, dfsph_history):
         groups = (int(params[0].n) + local_size - 1) // local_size
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
                 s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
                                                       particle_a, particle_rho, obstacle_box, time_state,
-                                                      particle_residual, dfsph_neighbours, dfsph_neighbour_count)
+                                                      particle_residual, dfsph_neighbours, dfsph_neighbour_count,
+                                                      dfsph_gradients)
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
         if n_groups == 0:

@@ -1,5 +1,6 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
--sum_j V (s_i + s_j) grad W_ij over its neighbour list (dfsph_factor), s_j = alpha_j r_j (divergence-free)
+-sum_j V (s_i + s_j) grad W_ij over its neighbour list, with the gradients dfsph_factor stored
+(dfsph_gradients), s_j = alpha_j r_j (divergence-free)
 or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
 with the pressure accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
 (dfsph_check); invocation 0 counts the update.
@@ -14,7 +15,6 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
-from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 from sphcore.workgroups import launcher
@@ -23,15 +23,14 @@ from sphcore.workgroups import launcher
 @lru_cache(maxsize=None)
 def dfsph_velocity(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
-    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
-    near_obstacles, solid = obstacles(spec, real)
-    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
-    listed_pair = neighbour_list(spec, real)
+    near_walls = cells(spec, real)[2]
+    near_obstacles = obstacles(spec, real)[0]
+    listed_gradient = neighbour_list(spec, real)[1]
 
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
                             time_state, particle_alpha, particle_residual, dfsph_control, particle_kappa,
-                            dfsph_neighbours, dfsph_neighbour_count):
+                            dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
         #     invocation 0 counts the update
@@ -56,26 +55,22 @@ def dfsph_velocity(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
-        coef = real(P.pressure_coef) / real(P.rest_density)
         change_x = real(0.0)
         change_y = real(0.0)
         change_z = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
-            # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and the
-            #     direction from it to i (neighbour_list.glsl)
-            j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
-                inward_z)
-            # [6] -V (s_i + s_j) grad_i W_ij = coef kernel_gradient (s_i + s_j) r_hat: away from a
-            #     compressed neighbourhood
+            # [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
+            j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot, xi_x,
+                                                      xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z)
+            # [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
             sj = scale * particle_alpha[j] * particle_residual[j]
             if warm:
                 sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
-            t = coef * pair_gradient(P, r2, rlen, image) * (si + sj)
-            change_x += t * r_hat_x
-            change_y += t * r_hat_y
-            change_z += t * r_hat_z
+            t = si + sj
+            change_x -= t * g_x
+            change_y -= t * g_y
+            change_z -= t * g_z
         # [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
         #     (constant density; only the warm start reads the sum of others, and it writes none)
         if solve == SOLVE_DIVERGENCE:

@@ -1,6 +1,7 @@
 """The neighbour lists (dfsph.py: written by compute_density's scan), walked by compute_forces, and under
-DFSPH by dfsph_factor, dfsph_residual and dfsph_velocity. GLSL reads particle_x and dfsph_neighbours as
-buffers the including shader declares; here they are arguments, after the parameter block.
+DFSPH by dfsph_factor, dfsph_residual and dfsph_velocity (with GRADIENTS the factor stores each entry's
+gradient, which the sweeps read). GLSL reads particle_x, dfsph_neighbours and dfsph_gradients as buffers the
+including shader declares; here they are arguments, after the parameter block.
 
 Mirror of shaders/sph/neighbour_list.glsl: same names, same statements. A GLSL vec3 `v` is
 `v_x, v_y, v_z`; the out parameters j, image, r, r2 and rlen are returned before the direction.
@@ -12,6 +13,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK
+from sphcore.sph.kernels import kernels
 from sphcore.sph.pairs import pairs
 
 
@@ -19,6 +21,8 @@ from sphcore.sph.pairs import pairs
 def neighbour_list(spec, real=np.float32):
     reflected = cells(spec, real)[3]
     pair_direction = pairs(real)
+    pair_gradient = kernels(spec, real)[2]
+    GRADIENTS = spec.GRADIENTS
 
     @njit
     def listed_pair(P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
@@ -38,4 +42,21 @@ def neighbour_list(spec, real=np.float32):
         r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
         return j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z
 
-    return listed_pair
+    @njit
+    def listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y,
+                        wall_z, inward_x, inward_y, inward_z):
+        """Entry `slot` of particle i's list under DFSPH: (j, image, g_x, g_y, g_z), g = V grad_i W_ik. With
+        GRADIENTS, as dfsph_factor stored it this step; else computed again as dfsph_factor computed it."""
+        if GRADIENTS:
+            k = slot * P.n + i
+            pair = int(dfsph_neighbours[k])
+            j = pair & NEIGHBOUR_MASK
+            image = pair >> IMAGE_SHIFT
+            return j, image, dfsph_gradients[k, 0], dfsph_gradients[k, 1], dfsph_gradients[k, 2]
+        j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+            P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
+            inward_z)
+        g = real(P.pressure_coef) / real(P.rest_density) * pair_gradient(P, r2, rlen, image)
+        return j, image, -(g * r_hat_x), -(g * r_hat_y), -(g * r_hat_z)
+
+    return listed_pair, listed_gradient
