@@ -243,6 +243,16 @@ def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gra
     return state
 
 
+def list_entries(state, spec, name="dfsph_neighbours"):
+    """Buffer `name` of the neighbour lists (dfsph_neighbours, or dfsph_gradients) of a state run with `spec`,
+    as (particles, spec.MAX_NEIGHBOURS[, 4]) in particle order of the buffers: either layout (list_slot)."""
+    n, slots = len(state["particle_id"]), spec.MAX_NEIGHBOURS
+    words = np.asarray(state[name])[:n * slots]
+    if spec.LIST_BY_PARTICLE:
+        return words.reshape(n, slots, *words.shape[1:])
+    return words.reshape(slots, n, *words.shape[1:]).swapaxes(0, 1)
+
+
 def check_obstacles(state, spec):
     """A plan with spec.OBSTACLES boxes reads that many from obstacle_box: each must be a box (min
     below max on every axis used), else the state was made without them (empty_state's

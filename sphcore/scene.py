@@ -590,7 +590,9 @@ class Scene:
         before). Measured, 3D, h = 2 dx: numba 1.67x faster at 64,000 particles, the H200 1.13x at 1 M
         and 1.12x at 8 M. Lists of more than LIST_WORDS[backend] words in all (a large scene, or a large
         fluid.smoothing_ratio) are left out: the scan needs no memory. Under DFSPH on numba, where they fit
-        (GRADIENT_SLOTS), dfsph_factor also stores each list entry's gradient for the sweeps (GRADIENTS)."""
+        (GRADIENT_SLOTS), dfsph_factor also stores each list entry's gradient for the sweeps (GRADIENTS). numba's
+        lists are particle-major, Vulkan's slot-major (LIST_BY_PARTICLE; sphcore.backends.list_entries reads
+        either in particle order)."""
         from sphcore.memory import particle_count
 
         spec = self.spec
@@ -598,7 +600,7 @@ class Scene:
             spec = spec._replace(MAX_NEIGHBOURS=self.max_neighbours)
         if spec.DFSPH and particle_count(self) * spec.MAX_NEIGHBOURS <= GRADIENT_SLOTS.get(backend, 0):
             spec = spec._replace(GRADIENTS=True)  # (the same bits: dfsph_factor stores what the sweeps compute)
-        return spec
+        return spec._replace(LIST_BY_PARTICLE=backend == "numba" and spec.MAX_NEIGHBOURS > 0)
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""

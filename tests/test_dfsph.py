@@ -13,7 +13,7 @@ import pytest
 
 from conftest import assert_stage_agrees, vulkan_or_skip
 from reference import neighbours
-from sphcore.backends import Stage, empty_state, plan
+from sphcore.backends import Stage, empty_state, list_entries, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation, SimulationError, run
@@ -91,9 +91,13 @@ def test_solver_stages_agree_and_count_the_same_iterations():
             a, b = cpu.backend.read(), gpu.backend.read()
             # the residual rho / rho_0 + dt d - 1 cancels to a few float32 ulps of 1, not of itself
             gap = np.abs(a.pop("particle_residual") - b.pop("particle_residual")).max()
-            # numba stores the pair gradients (spec.GRADIENTS), Vulkan computes them again in each sweep
+            # numba stores the pair gradients (spec.GRADIENTS), Vulkan computes them again in each sweep; the
+            # lists are particle-major on numba, slot-major on Vulkan (list_entries reads both)
             assert cpu.spec.GRADIENTS and not gpu.spec.GRADIENTS and len(b.pop("dfsph_gradients")) == 1
             a.pop("dfsph_gradients")
+            assert cpu.spec.LIST_BY_PARTICLE and not gpu.spec.LIST_BY_PARTICLE
+            a["dfsph_neighbours"] = list_entries(a, cpu.spec).copy()
+            b["dfsph_neighbours"] = list_entries(b, gpu.spec).copy()
             assert gap <= 8 * np.finfo(np.float32).eps, f"after {stage}: particle_residual differs by {gap:g}"
             assert_stage_agrees(a, b, stage, STAGE_RTOL)
             if stage.name == "dfsph_factor":  # the step starts both solves' indirect dispatches
@@ -152,7 +156,7 @@ def test_neighbour_lists_hold_every_pair_within_h():
         n, slots = sim.n, scene.max_neighbours
         x = st["particle_x"][:, :2].astype(np.float64)
         count = st["dfsph_neighbour_count"].copy()
-        lists = st["dfsph_neighbours"].reshape(slots, n).T.copy()
+        lists = list_entries(st, sim.spec).copy()
     assert slots == 26 and len(lists) == n and 0 < count.max() <= slots
     expected = neighbours(x, scene.h, scene["domain.box_min"], scene["domain.box_max"])
     images = 0
@@ -186,8 +190,9 @@ def test_forces_walk_the_list_as_the_scan_would(backend):
         state = {k: v.copy() for k, v in sim.backend.state.items()}
     state["particle_p"][:] = 0.0
     accelerations = {}
-    for s in (scene, wcsph):
-        b = make_backend(backend, s.params(len(state["particle_id"])), state, [Stage("compute_forces")], s.spec)
+    for s in (scene, wcsph):  # (DFSPH: numba's list layout, particle-major, which either backend reads)
+        spec = sim.spec if s.dfsph else s.spec
+        b = make_backend(backend, s.params(len(state["particle_id"])), state, [Stage("compute_forces")], spec)
         try:
             b.run_stage(Stage("compute_forces"))
             accelerations[s.dfsph] = b.read()["particle_a"]
@@ -207,7 +212,7 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
         vulkan_or_skip()
     scene = scene_of(**{"physics.pressure_solver": "state_equation", "physics.surface_tension": True})
     assert scene.spec.MAX_NEIGHBOURS == 0 and scene.spec_for("numba").MAX_NEIGHBOURS == scene.max_neighbours == 26
-    assert scene.spec_for("vulkan") == scene.spec_for("numba")
+    assert scene.spec_for("vulkan") == scene.spec_for("numba")._replace(LIST_BY_PARTICLE=False)
     with Simulation(scene, "numba") as sim:
         sim.advance(40)  # the column collapsing into the corner: images of both walls
         moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
@@ -370,11 +375,11 @@ def test_stored_pair_gradients_give_the_bits_of_computed_ones(backend, monkeypat
         if name != "dfsph_gradients":
             assert np.array_equal(a[name], b[name]), name
     # the stored entries: alpha_i = 1 / (|sum_j g|^2 + sum_j |g|^2) over each particle's list
-    n, slots = len(a["particle_id"]), scene.spec_for(backend).MAX_NEIGHBOURS
-    g = a["dfsph_gradients"].reshape(slots, n, 4)[:, :, :3].astype(np.float64)
-    used = np.arange(slots)[:, None] < np.minimum(a["dfsph_neighbour_count"], slots)[None, :]
+    spec = scene.spec_for(backend)._replace(GRADIENTS=True)
+    g = list_entries(a, spec, "dfsph_gradients")[:, :, :3].astype(np.float64)
+    used = np.arange(spec.MAX_NEIGHBOURS)[None, :] < np.minimum(a["dfsph_neighbour_count"], spec.MAX_NEIGHBOURS)[:, None]
     g[~used] = 0.0
-    s = (g.sum(axis=0) ** 2).sum(axis=1) + (g ** 2).sum(axis=(0, 2))
+    s = (g.sum(axis=1) ** 2).sum(axis=1) + (g ** 2).sum(axis=(1, 2))
     alone = s <= 1e-6 / scene.h ** 2
     assert np.allclose(a["particle_alpha"][~alone], 1.0 / s[~alone], rtol=1e-4)
     assert not alone.all() and (a["dfsph_gradients"][:, 3] == 0).all()

@@ -106,7 +106,7 @@ void main() {
                         fingerprint += neighbour_hash(particle_id[j], image);
                     }
                     if (MAX_NEIGHBOURS > 0u && (j != i || image != 0u)) {
-                        if (count < MAX_NEIGHBOURS) dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT);
+                        if (count < MAX_NEIGHBOURS) dfsph_neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
                         count += 1u;
                     }
                 }

@@ -74,7 +74,7 @@ void main() {
         real3 grad = g * r_hat;
         sum_grad -= grad;
         sum_grad2 += g * g;
-        if (GRADIENTS) dfsph_gradients[slot * P.n + i] = real4(-grad, 0.0);
+        if (GRADIENTS) dfsph_gradients[list_slot(i, slot)] = real4(-grad, 0.0);
     }
     // [5] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
     real s = sum_grad.x * sum_grad.x + sum_grad.y * sum_grad.y + sum_grad.z * sum_grad.z + sum_grad2;

@@ -9,7 +9,7 @@
 // r2 and rlen, the squared and plain distance to it; returns the direction from it to i (pairs.glsl).
 real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uint j, out uint image,
                   out real3 r, out real r2, out real rlen) {
-    uint pair = dfsph_neighbours[slot * P.n + i];
+    uint pair = dfsph_neighbours[list_slot(i, slot)];
     j = pair & NEIGHBOUR_MASK;
     image = pair >> IMAGE_SHIFT;
     real3 xk = particle_x[j].xyz;
@@ -25,7 +25,7 @@ real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uin
 // list's layout); else computed again as dfsph_factor computed it: the same bits.
 real3 listed_gradient(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uint j, out uint image) {
     if (GRADIENTS) {
-        uint k = slot * P.n + i;
+        uint k = list_slot(i, slot);
         uint pair = dfsph_neighbours[k];
         j = pair & NEIGHBOUR_MASK;
         image = pair >> IMAGE_SHIFT;

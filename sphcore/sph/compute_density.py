@@ -15,7 +15,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.density_diffusion import density_diffusion
-from sphcore.sph.dfsph import IMAGE_SHIFT
+from sphcore.sph.dfsph import IMAGE_SHIFT, list_slots
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
@@ -42,6 +42,7 @@ def compute_density(spec, real=np.float32):
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
+    list_slot = list_slots(spec)
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
     hydrostatic_density, diffusion_term = density_diffusion(spec, real)
@@ -123,7 +124,7 @@ def compute_density(spec, real=np.float32):
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
                         if MAX_NEIGHBOURS > 0 and (j != i or image != 0):
                             if count < MAX_NEIGHBOURS:
-                                dfsph_neighbours[count * P.n + i] = j | (image << IMAGE_SHIFT)
+                                dfsph_neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
                             count += 1
                     if not CONTINUITY or r2 >= P.h2 or (j == i and image == 0):
                         continue

@@ -4,6 +4,8 @@ and dfsph_history, shared by the dfsph_* mirrors.
 Mirror of shaders/sph/dfsph.glsl: same names, same values (the step, the solves and their
 equations are described there).
 """
+from functools import lru_cache
+
 from numba import njit
 
 SOLVE_DIVERGENCE = 1  # P.level of the divergence-free solve's stages
@@ -33,6 +35,20 @@ NEIGHBOUR_MASK = (1 << IMAGE_SHIFT) - 1
 @njit
 def dispatch_base(solve):
     return CONTROL_DISPATCH + 8 * (solve - 1)
+
+
+@lru_cache(maxsize=None)
+def list_slots(spec):
+    """`list_slot(P, i, slot)` of the spec's list layout (LIST_BY_PARTICLE: particle-major, else slot-major)."""
+    MAX_NEIGHBOURS, LIST_BY_PARTICLE = spec.MAX_NEIGHBOURS, spec.LIST_BY_PARTICLE
+
+    @njit
+    def list_slot(P, i, slot):
+        if LIST_BY_PARTICLE:
+            return i * MAX_NEIGHBOURS + slot
+        return slot * P.n + i
+
+    return list_slot
 
 # dfsph_state (float32)
 STATE_TOLERANCE = 0  # [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error

@@ -14,7 +14,7 @@ from numba import njit, prange
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, CONTROL_OVERFLOW_STEP, CONTROL_STEP,
-                               SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START, dispatch_base)
+                               SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START, dispatch_base, list_slots)
 from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
@@ -25,6 +25,7 @@ def dfsph_factor(spec, real=np.float32):
     near_walls = cells(spec, real)[2]
     near_obstacles = obstacles(spec, real)[0]
     MAX_NEIGHBOURS, GRADIENTS = spec.MAX_NEIGHBOURS, spec.GRADIENTS
+    list_slot = list_slots(spec)
     pair_gradient = kernels(spec, real)[2]
     listed_pair = neighbour_list(spec, real)[0]
 
@@ -77,7 +78,7 @@ def dfsph_factor(spec, real=np.float32):
             sum_grad_z -= grad_z
             sum_grad2 += g * g
             if GRADIENTS:
-                k = slot * P.n + i
+                k = list_slot(P, i, slot)
                 dfsph_gradients[k, 0] = -grad_x
                 dfsph_gradients[k, 1] = -grad_y
                 dfsph_gradients[k, 2] = -grad_z

@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.cells import cells
-from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK
+from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots
 from sphcore.sph.kernels import kernels
 from sphcore.sph.pairs import pairs
 
@@ -23,12 +23,13 @@ def neighbour_list(spec, real=np.float32):
     pair_direction = pairs(real)
     pair_gradient = kernels(spec, real)[2]
     GRADIENTS = spec.GRADIENTS
+    list_slot = list_slots(spec)
 
     @njit
     def listed_pair(P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                     inward_x, inward_y, inward_z):
         """Entry `slot` of particle i's list: (j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z)."""
-        pair = int(dfsph_neighbours[slot * P.n + i])
+        pair = int(dfsph_neighbours[list_slot(P, i, slot)])
         j = pair & NEIGHBOUR_MASK
         image = pair >> IMAGE_SHIFT
         xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
@@ -48,7 +49,7 @@ def neighbour_list(spec, real=np.float32):
         """Entry `slot` of particle i's list under DFSPH: (j, image, g_x, g_y, g_z), g = V grad_i W_ik. With
         GRADIENTS, as dfsph_factor stored it this step; else computed again as dfsph_factor computed it."""
         if GRADIENTS:
-            k = slot * P.n + i
+            k = list_slot(P, i, slot)
             pair = int(dfsph_neighbours[k])
             j = pair & NEIGHBOUR_MASK
             image = pair >> IMAGE_SHIFT
