@@ -58,7 +58,8 @@ def main():
                     sim.advance(args.per_submit)
                 sim.backend.read_buffer("time_state")  # (waits for the device)
                 seconds = (time.perf_counter() - start) / (args.steps // args.per_submit * args.per_submit)
-                log = sim.solver_log.array()[-(args.steps // args.per_submit * args.per_submit):] if solver == "dfsph" else None
+                timed = args.steps // args.per_submit * args.per_submit
+                log = sim.solver_log.array()[-timed:] if solver == "dfsph" else None
                 row = {"resolution": r, "particles": sim.n, "solver": solver, "ms_per_step": 1e3 * seconds,
                        "max_iterations": scene["fluid.max_iterations"] if solver == "dfsph" else None,
                        "unconverged_steps": int((log[:, 7] == 0).sum()) if log is not None else None,

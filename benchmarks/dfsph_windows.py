@@ -53,7 +53,8 @@ def main():
             rows.append({"rule": rule or "whole budget", "lookback": lookback, "particles": sim.n,
                          "ms_per_step": 1e3 * (time.perf_counter() - start) / steps,
                          "resumptions": sim.backend.resumptions - resumed, "windows_at_end": sim.backend.windows,
-                         "density_iterations_mean": float(log[:, 5].mean()), "density_iterations_max": int(log[:, 5].max()),
+                         "density_iterations_mean": float(log[:, 5].mean()),
+                         "density_iterations_max": int(log[:, 5].max()),
                          "divergence_iterations_mean": float(log[:, 3].mean()),
                          "device": sim.backend.ctx.device_name})
         backends.VulkanBackend.next_window = default

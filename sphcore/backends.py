@@ -515,8 +515,9 @@ class VulkanBackend:
         return self._windowed(dfsph_solve(solve, self.windows[solve])[1:] + self.stages[last + 1:])
 
     def _windowed_steps(self, steps, control):
-        """Run `steps` steps with windows (dfsph.glsl), resuming each suspended solve, from the device's
-        dfsph_control as `control` holds it; return the control after them."""
+        """Run up to `steps` steps with windows (dfsph.glsl) from the device's dfsph_control as `control` holds
+        it, resuming a suspended solve to the end of its step (the submission's later steps were skipped);
+        return (the control after them, the steps completed)."""
         first, timed = int(control[CONTROL_STEP]), self.profile is not None
         stages = self._windowed(self.stages)
         while True:
@@ -548,8 +549,8 @@ class VulkanBackend:
         """A solve's next window, from the most iterations it took in the last WINDOW_LOOKBACK steps: the least
         power of two (few distinct recordings) above most + 1, at least LEAST_WINDOW, within its budget. A
         window too short costs a resumption (a round trip to the host, about a millisecond), one too long
-        two empty dispatches per iteration (a few microseconds; measured on the H200 in
-        benchmarks/results/dfsph/h200/windows.json)."""
+        two empty dispatches per iteration (a few microseconds; measured on the H200 by
+        benchmarks/dfsph_windows.py, benchmarks/results/dfsph/h200/windows_*.json)."""
         return min(budget, max(LEAST_WINDOW, 1 << (most + 1).bit_length()))
 
     def run_stage(self, stage):

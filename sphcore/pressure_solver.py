@@ -12,8 +12,8 @@ import numpy as np
 
 from sphcore.simulation import SimulationError
 from sphcore.sph.dfsph import (CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES, CONTROL_MAX_ITERATIONS,
-                               CONTROL_OVERFLOW_STEP, CONTROL_RUNNING, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_FAILED_ERROR,
-                               STATE_TOLERANCE)
+                               CONTROL_OVERFLOW_STEP, CONTROL_RUNNING, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+                               STATE_FAILED_ERROR, STATE_TOLERANCE)
 
 LOG_COLUMNS = ("step", "dt", "time", "divergence_iterations", "divergence_error", "density_iterations",
                "density_error", "converged")

@@ -377,7 +377,8 @@ def test_stored_pair_gradients_give_the_bits_of_computed_ones(backend, monkeypat
     # the stored entries: alpha_i = 1 / (|sum_j g|^2 + sum_j |g|^2) over each particle's list
     spec = scene.spec_for(backend)._replace(GRADIENTS=True)
     g = list_entries(a, spec, "dfsph_gradients")[:, :, :3].astype(np.float64)
-    used = np.arange(spec.MAX_NEIGHBOURS)[None, :] < np.minimum(a["dfsph_neighbour_count"], spec.MAX_NEIGHBOURS)[:, None]
+    slots = spec.MAX_NEIGHBOURS
+    used = np.arange(slots)[None, :] < np.minimum(a["dfsph_neighbour_count"], slots)[:, None]
     g[~used] = 0.0
     s = (g.sum(axis=1) ** 2).sum(axis=1) + (g ** 2).sum(axis=(1, 2))
     alone = s <= 1e-6 / scene.h ** 2

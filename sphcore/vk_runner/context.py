@@ -176,7 +176,8 @@ class Recording:
         begin = vk.VkCommandBufferBeginInfo(sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO)
         if secondary:  # (several times in one primary: simultaneous use)
             begin = vk.VkCommandBufferBeginInfo(
-                sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO, flags=vk.VK_COMMAND_BUFFER_USAGE_SIMULTANEOUS_USE_BIT,
+                sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
+                flags=vk.VK_COMMAND_BUFFER_USAGE_SIMULTANEOUS_USE_BIT,
                 pInheritanceInfo=vk.VkCommandBufferInheritanceInfo(
                     sType=vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_INHERITANCE_INFO))
         vk.vkBeginCommandBuffer(self.command_buffer, begin)
@@ -343,7 +344,8 @@ class Context:
         features = vk.VkPhysicalDeviceFeatures(shaderFloat64=self.shader_float64)
         # conditional rendering, where the device has it: dispatches skipped by a word in a buffer (the
         # DFSPH host's windows, sphcore.backends.VulkanBackend)
-        extensions = {_text(e.extensionName) for e in vk.vkEnumerateDeviceExtensionProperties(self.physical_device, None)}
+        extensions = {_text(e.extensionName)
+                      for e in vk.vkEnumerateDeviceExtensionProperties(self.physical_device, None)}
         self.conditional_rendering = CONDITIONAL_RENDERING in extensions
         enabled, chain = [], vk.ffi.NULL
         if self.conditional_rendering:
