@@ -599,7 +599,7 @@ class Scene:
         if not spec.DFSPH and particle_count(self) * self.max_neighbours <= LIST_WORDS.get(backend, 0):
             spec = spec._replace(MAX_NEIGHBOURS=self.max_neighbours)
         if spec.DFSPH and particle_count(self) * spec.MAX_NEIGHBOURS <= GRADIENT_SLOTS.get(backend, 0):
-            spec = spec._replace(GRADIENTS=True)  # (the same bits: dfsph_factor stores what the sweeps compute)
+            spec = spec._replace(GRADIENTS=True)  # (dfsph_factor stores what the sweeps would compute)
         return spec._replace(LIST_BY_PARTICLE=backend == "numba" and spec.MAX_NEIGHBOURS > 0)
 
     def params(self, n):

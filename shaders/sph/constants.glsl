@@ -32,6 +32,6 @@ layout(constant_id = 20) const uint MAX_NEIGHBOURS = 0;   // DFSPH: slots per pa
                                                           // (dfsph.glsl; fluid.max_neighbours)
 layout(constant_id = 21) const bool GRADIENTS = false;    // DFSPH: dfsph_factor stores each list entry's
                                                           // V grad W for the sweeps (Scene.spec_for: numba),
-                                                          // else they compute it again (the same bits)
+                                                          // else they compute it again (dfsph.glsl)
 layout(constant_id = 22) const bool LIST_BY_PARTICLE = false; // the lists particle-major (Scene.spec_for: numba),
                                                           // else slot-major (dfsph.glsl: list_slot)

@@ -18,7 +18,8 @@
 // run in the scan's order, with the same terms, over about a third (2D) or a seventh (3D) of the candidates.
 // The sweeps use each entry's g = V grad_i W_ij as dfsph_factor computes it (listed_gradient): with the
 // specialization constant GRADIENTS (numba) the factor stores it in dfsph_gradients[list_slot(i, slot)] and the
-// sweeps read it; else they compute it again. The same bits either way.
+// sweeps read it; else they compute it again. The same bits either way on numba and lavapipe (the NVIDIA
+// driver, which fuses multiply-adds where it likes, gives the two ways different last bits).
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
 // (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level
 // (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order

@@ -22,7 +22,7 @@ real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uin
 
 // Entry `slot` of particle i's list under DFSPH: its neighbour j (`image`: the walls it is mirrored across);
 // returns g = V grad_i W_ik. With GRADIENTS, as dfsph_factor stored it this step (dfsph_gradients, in the
-// list's layout); else computed again as dfsph_factor computed it: the same bits.
+// list's layout); else computed again as dfsph_factor computed it: the same bits without fused multiply-adds.
 real3 listed_gradient(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uint j, out uint image) {
     if (GRADIENTS) {
         uint k = list_slot(i, slot);
