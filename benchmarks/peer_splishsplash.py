@@ -15,7 +15,8 @@ compiled before, as a warm run); SPlisHSPlasH: the "Time sum: SimStep" its `spla
 over the simulated time (the sum of its time steps, "Total number: Time step size"), so its start-up
 (loading, boundary sampling) is left out on both sides; its mean iterations and step are parsed too.
 Never in CI: it needs `pip install pysplishsplash` (2.19, a cp311 wheel) in some environment; give its
-`splash` with --splash. Writes a JSON with both sides and prints the ratio.
+`splash` with --splash. Writes a JSON with both sides and prints the ratio. `--sphcore-only vulkan` runs
+sphcore's side alone through Vulkan (the GPU machine has no SPlisHSPlasH).
 
     python3 -m venv /tmp/splash && /tmp/splash/bin/pip install pysplishsplash
     OMP_NUM_THREADS=2 .venv/bin/python benchmarks/peer_splishsplash.py --splash /tmp/splash/bin/splash \\
@@ -32,14 +33,14 @@ from pathlib import Path
 GL_FIX = "/lib/x86_64-linux-gnu/libGLdispatch.so.0"  # the wheel's bundled GL dispatch segfaults without it
 
 
-def sphcore_side(settings, t_end):
+def sphcore_side(settings, t_end, backend="numba"):
     import numpy as np
 
     from sphcore.simulation import Simulation
     from sphcore.validate.dam_break import dam_break_scene
 
     scene = dam_break_scene(settings)
-    with Simulation(scene, "numba") as sim:  # its start compiles every stage (warm_up)
+    with Simulation(scene, backend) as sim:  # its start compiles every stage (warm_up)
         wall = 0.0
         while sim.time < t_end:
             start = time.perf_counter()
@@ -52,7 +53,7 @@ def sphcore_side(settings, t_end):
         "particles": sim.n, "steps": steps, "t": t, "wall_s": wall, "cost_per_simulated_s": wall / t,
         "mean_dt": t / steps, "density_iterations_mean": float(log[:, 5].mean()),
         "divergence_iterations_mean": float(log[:, 3].mean()), "unconverged_steps": int((log[:, 7] == 0).sum()),
-        "front_x": float(np.asarray(state["particle_x"])[:, 0].max()),
+        "front_x": float(np.asarray(state["particle_x"])[:, 0].max()), "device": sim.device_name,
     }
 
 
@@ -110,7 +111,9 @@ def splash_wall(splash, scene_file, stop_at, out_dir, env):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--splash", required=True, help="SPlisHSPlasH's `splash` (pip install pysplishsplash)")
+    ap.add_argument("--splash", help="SPlisHSPlasH's `splash` (pip install pysplishsplash)")
+    ap.add_argument("--sphcore-only", metavar="BACKEND", help="run sphcore's side alone, on BACKEND (numba or "
+                    "vulkan: the GPU machine, which has no SPlisHSPlasH), and write it")
     ap.add_argument("--resolution", type=int, default=20, help="particles across the column width a")
     ap.add_argument("--depth", type=int, default=12, help="particles across the channel")
     ap.add_argument("--t-end", type=float, default=0.4, help="simulated seconds")
@@ -119,6 +122,15 @@ def main():
 
     settings = {"dimension": 3, "resolution": args.resolution, "depth": args.depth, "pressure_solver": "dfsph",
                 "a": 0.25}
+    if args.sphcore_only:
+        scene, ours = sphcore_side(settings, args.t_end, args.sphcore_only)
+        print(json.dumps(ours, indent=1))
+        if args.out:
+            Path(args.out).write_text(json.dumps({"case": "Martin & Moyce column, 3D channel", "settings": settings,
+                                                  f"sphcore_{args.sphcore_only}_dfsph": ours}, indent=1))
+        return
+    if not args.splash:
+        ap.error("--splash is needed (or --sphcore-only BACKEND)")
     scene, ours = sphcore_side(settings, args.t_end)
     largest = float(scene.params(1)[0]["dt"])
     splash = Path(args.splash)
