@@ -18,6 +18,7 @@ from collections import namedtuple
 import numpy as np
 
 from sphcore.params import MAX_OBSTACLES, SHADER_DIR, pyramid_levels
+from sphcore.vk_runner.context import STAGING_KEPT
 from sphcore.sph.apply_order import apply_order
 from sphcore.sph.cell_offsets import cell_offsets
 from sphcore.sph.choose_dt import choose_dt
@@ -388,6 +389,10 @@ class NumbaBackend:
         """One buffer's contents (a copy)."""
         return self.state[name].copy()
 
+    def write_buffer(self, name, values):
+        """Set a buffer's contents."""
+        self.state[name][...] = values
+
     def clear_status(self):
         self.state["grid_status"][:] = STATUS_CLEAR
 
@@ -439,6 +444,7 @@ class VulkanBackend:
         for name in sorted({s.name for s in stages}):
             self._pipeline(name)
         self._recordings = {}
+        self._known = {}  # name -> a copy of a small buffer as the device holds it, until the device runs again
         # DFSPH: each solve's budget (its recorded iterations in the plan) and window
         self.budget = {solve: sum(s.indirect and s.level == solve for s in stages) // 2
                        for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY)}
@@ -489,6 +495,7 @@ class VulkanBackend:
         return self._recordings[key]
 
     def _submit(self, rec):
+        self._known.clear()
         self.ctx.submit(rec)
         if rec.timer is not None:
             for stage, seconds in zip(rec.stages, rec.timer.seconds()):
@@ -524,9 +531,10 @@ class VulkanBackend:
             control[CONTROL_RUNNING] = 1
             for solve, window in self.windows.items():
                 control[CONTROL_WINDOW + solve] = window
-            self.buffers["dfsph_control"].write(control)
+            if not np.array_equal(control, self._known.get("dfsph_control")):  # (mostly the device's already)
+                self.write_buffer("dfsph_control", control)
             self._submit(self._recording(steps, stages, timed, predicate=True))
-            control = self.read_buffer("dfsph_control")
+            control = self._read("dfsph_control")
             if control[CONTROL_RUNNING]:
                 break
             # a solve spent its window unconverged, the rest of the submission was skipped: resume there
@@ -538,7 +546,7 @@ class VulkanBackend:
             self.profile.steps += last - first
         # the next windows, from the iterations the last WINDOW_LOOKBACK steps took
         if last > first:
-            history = self.read_buffer("dfsph_history")
+            history = self._read("dfsph_history")
             rows = history[[(step - 1) % HISTORY_ROWS for step in range(max(0, last - WINDOW_LOOKBACK) + 1, last + 1)]]
             for solve, column in ((SOLVE_DIVERGENCE, 3), (SOLVE_DENSITY, 5)):
                 self.windows[solve] = self.next_window(int(rows[:, column].max()), self.budget[solve])
@@ -556,7 +564,7 @@ class VulkanBackend:
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
         self._pipeline(stage.name)
-        self.ctx.submit(self._recording(1, [stage]))
+        self._submit(self._recording(1, [stage]))
 
     def step(self, count=1):
         if self.windows is None:
@@ -566,26 +574,43 @@ class VulkanBackend:
             if rest:
                 self._submit_steps(rest)
             return
-        control, done = self.read_buffer("dfsph_control"), 0
+        control, done = self._read("dfsph_control"), 0
         while done < count:
             steps = min(count - done, self.steps_per_submit)
             control, steps = self._windowed_steps(steps, control)
             done += steps
-        # the state as the mirror keeps it: no window
-        control[CONTROL_WINDOW + SOLVE_DIVERGENCE] = control[CONTROL_WINDOW + SOLVE_DENSITY] = 0
-        self.buffers["dfsph_control"].write(control)
+
+    def _read(self, name):
+        """A buffer's contents as the device holds them (a small one read once between the device's runs)."""
+        if name not in self._known:
+            array = self.buffers[name].read(self.dtypes[name], self.shapes[name])
+            if array.nbytes > STAGING_KEPT:
+                return array
+            self._known[name] = array
+        return self._known[name].copy()
 
     def read(self, names=None):
         """The buffers `names` (default: every buffer), read back from the device."""
-        return {name: self.buffers[name].read(self.dtypes[name], self.shapes[name])
-                for name in (BUFFERS if names is None else names)}
+        return {name: self.read_buffer(name) for name in (BUFFERS if names is None else names)}
 
     def read_buffer(self, name):
-        """One buffer's contents, read back from the device."""
-        return self.buffers[name].read(self.dtypes[name], self.shapes[name])
+        """One buffer's contents, read back from the device. dfsph_control as the mirror keeps it: the windows
+        the Vulkan host leaves on the device between calls (dfsph.glsl) read as 0."""
+        array = self._read(name)
+        if name == "dfsph_control":
+            array[CONTROL_WINDOW + SOLVE_DIVERGENCE] = array[CONTROL_WINDOW + SOLVE_DENSITY] = 0
+        return array
+
+    def write_buffer(self, name, values):
+        """Set a buffer's contents on the device."""
+        array = np.asarray(values, self.dtypes[name]).reshape(self.shapes[name])
+        self.buffers[name].write(array)
+        self._known.pop(name, None)
+        if array.nbytes <= STAGING_KEPT:
+            self._known[name] = array.copy()
 
     def clear_status(self):
-        self.buffers["grid_status"].write(STATUS_CLEAR)
+        self.write_buffer("grid_status", STATUS_CLEAR)
 
     def close(self):
         if self.ctx.device is None:

@@ -216,10 +216,7 @@ class Simulation:
             if values.shape != current[name].shape or values.dtype != current[name].dtype:
                 raise CheckpointError(f"checkpoint buffer {name} is {values.dtype}{list(values.shape)}, this scene "
                                       f"needs {current[name].dtype}{list(current[name].shape)}")
-            if self.backend.name == "vulkan":
-                self.backend.buffers[name].write(values)
-            else:
-                self.backend.state[name][...] = values
+            self.backend.write_buffer(name, values)
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
         if self.scene.dfsph and "solver_log" in arrays:  # (a replay's restore keeps the rows it has)
