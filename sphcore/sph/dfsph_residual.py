@@ -1,6 +1,6 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
-rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, with the gradients dfsph_factor stored
-(dfsph_gradients); divergence-free solve
+rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, each gradient as dfsph_factor computes it
+(stored in dfsph_gradients with GRADIENTS); divergence-free solve
 r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a;
 each work group's residuals summed in order into dfsph_partial; the last work group to finish runs the
 solve's convergence test (dfsph_check). Dispatched indirectly: no work groups once the solve has stopped.

@@ -1,6 +1,6 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
--sum_j V (s_i + s_j) grad W_ij over its neighbour list, with the gradients dfsph_factor stored
-(dfsph_gradients), s_j = alpha_j r_j (divergence-free)
+-sum_j V (s_i + s_j) grad W_ij over its neighbour list, each gradient as dfsph_factor computes it (stored in
+dfsph_gradients with GRADIENTS), s_j = alpha_j r_j (divergence-free)
 or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
 with the pressure accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
 (dfsph_check); invocation 0 counts the update.
