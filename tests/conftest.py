@@ -23,6 +23,9 @@ def vulkan_or_skip():
         pytest.skip(f"no Vulkan here: {e}")
 
 
+# Vulkan validation layers on in the tests, unless SPHCORE_TEST_VALIDATION=0 (a GPU machine without them)
+VALIDATION = os.environ.get("SPHCORE_TEST_VALIDATION", "1") != "0"
+
 @pytest.fixture
 def open_backend():
     """open_backend(name, params, state, stages, spec) -> backend with validation layers on (Vulkan).
@@ -34,8 +37,7 @@ def open_backend():
     def open_(name, params, state, stages, spec, **options):
         if name == "vulkan":
             vulkan_or_skip()
-            # validation layers on, unless SPHCORE_TEST_VALIDATION=0 (a GPU machine without them)
-            options.setdefault("validation", os.environ.get("SPHCORE_TEST_VALIDATION", "1") != "0")
+            options.setdefault("validation", VALIDATION)
         backend = make_backend(name, params, state, stages, spec, **options)
         opened.append(backend)
         return backend

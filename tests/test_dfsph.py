@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import assert_stage_agrees, vulkan_or_skip
+from conftest import VALIDATION, assert_stage_agrees, schedule_dependent, vulkan_or_skip
 from reference import neighbours
 from sphcore.backends import Stage, empty_state, list_entries, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
@@ -83,7 +83,7 @@ def test_solver_stages_agree_and_count_the_same_iterations():
     vulkan_or_skip()
     scene = scene_of()
     cpu = Simulation(scene, "numba")
-    gpu = Simulation(scene, "vulkan", validation=True)
+    gpu = Simulation(scene, "vulkan", validation=VALIDATION)
     try:
         for stage in cpu.stages:
             cpu.backend.run_stage(stage)
@@ -132,7 +132,7 @@ def test_solver_stages_agree_and_count_the_same_iterations():
 def test_variants_run_and_converge_on_lavapipe(variant):
     vulkan_or_skip()
     scene = scene_of(**variant)
-    with Simulation(scene, "vulkan", validation=True) as sim:
+    with Simulation(scene, "vulkan", validation=VALIDATION) as sim:
         sim.advance(10)
         state = sim.read()
         log = log_of(sim)
@@ -323,7 +323,7 @@ def test_vulkan_windows_give_the_bits_of_the_whole_budget(monkeypatch):
     scene = scene_of()
 
     def run_with(windows):
-        with Simulation(scene, "vulkan", validation=True) as sim:
+        with Simulation(scene, "vulkan", validation=VALIDATION) as sim:
             submits = []
             submit = sim.backend._submit
             monkeypatch.setattr(sim.backend, "_submit", lambda rec: (submits.append(rec), submit(rec)))
@@ -349,7 +349,7 @@ def test_vulkan_windows_give_the_bits_of_the_whole_budget(monkeypatch):
         if window == 1:
             assert submits >= 3 + dispatched  # a resumption for every update past a solve's first
         assert np.array_equal(log, whole_log)
-        for name in whole:
+        for name in set(whole) - schedule_dependent(Stage("count_cells")):  # (a GPU's atomic order in a cell)
             assert np.array_equal(state[name], whole[name]), name
 
 
@@ -367,6 +367,9 @@ def test_stored_pair_gradients_give_the_bits_of_computed_ones(backend, monkeypat
         monkeypatch.setattr(sphcore.scene, "GRADIENT_SLOTS", {backend: 1 << 26} if stored else {})
         with Simulation(scene, backend) as sim:
             assert sim.spec.GRADIENTS == stored
+            if backend == "vulkan" and sim.backend.ctx.device_type != "CPU":
+                pytest.skip("a GPU compiler fuses multiply-adds where it likes: stored and computed gradients may "
+                            "differ in the last bits there (dfsph.glsl); lavapipe and numba do not fuse")
             sim.advance(12)
             runs[stored] = sim.backend.read(), log_of(sim)
     (a, log_a), (b, log_b) = runs[True], runs[False]
