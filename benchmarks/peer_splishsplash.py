@@ -17,7 +17,7 @@ over the simulated time (the sum of its time steps, "Total number: Time step siz
 Never in CI: it needs `pip install pysplishsplash` (2.19, a cp311 wheel) in some environment; give its
 `splash` with --splash. Writes a JSON with both sides and prints the ratio. `--sphcore-only vulkan` runs
 sphcore's side alone through Vulkan (the GPU machine has no SPlisHSPlasH), after a short run in the same
-process (the driver's first use of each pipeline is left out, as numba's compiling is).
+process (a fresh process's first recordings, slow in Python, are left out, as numba's compiling is).
 
     python3 -m venv /tmp/splash && /tmp/splash/bin/pip install pysplishsplash
     OMP_NUM_THREADS=2 .venv/bin/python benchmarks/peer_splishsplash.py --splash /tmp/splash/bin/splash \\
@@ -123,7 +123,7 @@ def main():
 
     settings = {"dimension": 3, "resolution": args.resolution, "depth": args.depth, "pressure_solver": "dfsph",
                 "a": 0.25}
-    if args.sphcore_only:  # (a short run first: the driver's first use of each pipeline, as numba's compiling)
+    if args.sphcore_only:  # (a short run first: the first recordings, as numba's compiling)
         sphcore_side(settings, min(0.05, args.t_end), args.sphcore_only)
         scene, ours = sphcore_side(settings, args.t_end, args.sphcore_only)
         print(json.dumps(ours, indent=1))
