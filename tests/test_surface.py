@@ -1,13 +1,12 @@
 """Marching cubes (shaders/mc) against scikit-image, analytic shapes and each other; the
 fluid's colour field and surface."""
 import math
-import os
 
 import numpy as np
 import pytest
 
 import sphcore
-from conftest import vulkan_or_skip
+from conftest import VALIDATION, vulkan_or_skip
 from mc_reference import reference_marching_cubes
 from sphcore.surface import Extractor, marching_cubes, particle_surface, weld
 
@@ -20,7 +19,7 @@ def extract(volume, level, spacing=(1.0, 1.0, 1.0), backend="numba", method="his
     """marching_cubes through an Extractor, with the validation layers on for Vulkan (none may report)."""
     if backend == "vulkan":
         vulkan_or_skip()
-        options["validation"] = os.environ.get("SPHCORE_TEST_VALIDATION", "1") != "0"
+        options["validation"] = VALIDATION
     with Extractor(volume.shape, spacing, backend=backend, method=method, **options) as extractor:
         mesh = weld(*extractor.extract(volume, level))
         if backend == "vulkan":
