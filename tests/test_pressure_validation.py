@@ -139,7 +139,7 @@ def test_tiny_buchner_run_on_numba(tmp_path):
     assert main(["validate", "dam-break-pressure", "--out", str(out), "--resolution", "8", "--t-end-star", "3.2"]) in (0, None)
     with open(out / "dam_break_pressure.csv") as f:
         rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
-    assert list(rows[0]) == ["t", "t_star", "p_star"]
+    assert list(rows[0]) == ["t", "t_star", "p_star", "p_star_6mm", "p_star_30mm", "p_star_60mm"]
     for r in rows:
         assert r["t_star"] == pytest.approx(r["t"] * math.sqrt(9.81 / 0.6), rel=1e-4, abs=1e-6)
     t = np.array([r["t_star"] for r in rows])
@@ -153,9 +153,19 @@ def test_tiny_buchner_run_on_numba(tmp_path):
     assert set(summary["meets"]) == {"peak_time", "peak_height", "rms"}
     assert (out / "dam_break_pressure.png").stat().st_size > 10_000
     # the peers' series (validation/data) beside ours, measured the same way
-    assert sorted(summary["peers"]) == sorted(f"{peer} {res}" for peer in buchner.PEERS for res in ("H/40", "H/80", "H/320"))
+    assert sorted(summary["peers"]) == sorted(f"{peer} {res}" for peer, (_, columns) in buchner.PEERS.items()
+                                              for res in columns)
     for label, peer in summary["peers"].items():
         assert peer["rms_points"] > 50 and 0.0 < peer["rms_p_star"] < 1.0, label
+    # De Courcy et al.'s simulation at every sensor: the RMS is rms_against's of our column at their times
+    reference = buchner.read_reference()
+    assert set(summary["reference"]) == set(buchner.REFERENCE) == set(rows[0]) - {"t", "t_star"}
+    for column, metrics in summary["reference"].items():
+        rms, count = buchner.rms_against(t, [r[column] for r in rows], *reference[column])
+        assert count == metrics["rms_points"] > 50 and metrics["rms_p_star"] == pytest.approx(rms, rel=1e-2), column  # (the CSV keeps 6 digits)
+    assert summary["rms_p_star_reference"] == summary["reference"]["p_star"]["rms_p_star"]
+    for column in buchner.REFERENCE:  # every sensor dry until the surge arrives, and then loaded
+        assert all(r[column] == 0.0 for r in rows if r["t_star"] < 1.5) and max(r[column] for r in rows) > 0.2, column
 
 
 def test_peer_metrics_are_ours_applied_to_their_series():
@@ -167,8 +177,26 @@ def test_peer_metrics_are_ours_applied_to_their_series():
     series = buchner.read_peers()
     for label, metrics in buchner.peer_errors().items():
         t, p = series[label]
-        assert np.all(np.diff(t) > 0) and t[0] < 2.45 and t[-1] > 6.5, label  # the impact and the plateau covered
+        assert np.all(np.diff(t) >= 0) and t[0] < 2.47 and t[-1] > 6.5, label  # the impact and the plateau covered
         assert metrics["rms_p_star"] == pytest.approx(buchner.errors(t, p)["rms_p_star"], rel=1e-12)
+    for label, (t, p) in buchner.read_reference().items():  # De Courcy et al.'s series: the impact and the plateau
+        assert np.all(np.diff(t) >= 0) and t[0] < 2.47 and t[-1] > 6.5, label
+
+
+def test_reference_metrics_pair_each_sensor_with_its_series(monkeypatch):
+    """reference_errors takes each sample column against its own reference series, at the series' times:
+    samples equal to it score zero, samples 0.1 above it score 0.1, and a column paired with another
+    sensor's series would not."""
+    t = np.linspace(2.4, 7.0, 200)
+    series = {column: (t, np.exp(-(t - 3.0 - 0.2 * k) ** 2 / 0.1)) for k, column in enumerate(buchner.REFERENCE)}
+    monkeypatch.setattr(buchner, "read_reference", lambda: series)
+    times = np.linspace(0.0, 7.3, 731)
+    for shift in (0.0, 0.1):
+        rows = [{"t_star": ts, **{c: math.exp(-(ts - 3.0 - 0.2 * k) ** 2 / 0.1) + shift for k, c in enumerate(series)}}
+                for ts in times]
+        for column, metrics in buchner.reference_errors(rows).items():
+            assert metrics["rms_points"] == 200 and metrics["rms_p_star"] == pytest.approx(shift, abs=2e-4), column
+            assert metrics["peak_t_star"] == pytest.approx(metrics["reference_peak_t_star"], abs=0.01)
 
 
 def test_report_shows_each_configurations_figures(tmp_path):

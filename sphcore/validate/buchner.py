@@ -25,8 +25,14 @@ smooth) are given beside them, not in place of them.
 
 Peers (PEERS; the summary's "peers", the plot's thin lines): the same metrics of TrixiParticles'
 own WCSPH results at this sensor and of Marrone et al. 2011's delta-SPH curves, at H/40, H/80 and
-H/320. TrixiParticles' reach RMS 0.27-0.32 and rise as slowly after the impact as ours; Marrone's
-0.16-0.19.
+H/320, and of De Courcy et al. 2024's incompressible delta-SPH at H/400. TrixiParticles' reach RMS
+0.27-0.32 and rise as slowly after the impact as ours, De Courcy's 0.34; Marrone's 0.16-0.19.
+
+A simulated reference (REFERENCE; the summary's "reference", the plot's lower panels): De Courcy et
+al. 2024's series at four heights on the same wall, their P4 at P1's. A code that solves the same
+equations should follow it, whatever the measured series does: the RMS of our samples minus theirs
+at their times (t* 2.4-7), the same to t* = CALM_UNTIL (before the plunging wave falls back and both
+series turn to noise), and each sensor's impact peak beside theirs.
 
 Model: linear equation of state at c = 20 sqrt(g H) (48.5 m/s, as TrixiParticles; 10 times the
 fastest flow, 2 sqrt(g H)), h = 2 dx, viscosity alpha = 0.02 (as Monaghan's alpha, or Mueller's
@@ -57,13 +63,19 @@ DATA_FILE = "buchner2002_P1_trixi.csv"
 SAMPLE_DT_STAR = 0.01  # t* between samples
 IMPACT_WINDOW = (2.0, 4.0)  # t*: the first impact (the data's second peak, the plunging wave, comes at 5.8)
 RMS_UNTIL = 7.0  # t*
+CALM_UNTIL = 6.0  # t*: the plunging wave falls back onto the flow after this
 SMOOTH_STAR = 0.1  # t*: the running mean reported beside the raw samples
 TARGETS = {"peak_time": 0.05, "peak_height": 0.20, "rms": 0.1}  # issue 12
 
 # Peers on the same case and sensor, digitised or taken from their own reference results (each file's
 # header names its source): {label: (file, {column label: column})}. Their metrics are computed as ours.
 PEERS = {"TrixiParticles WCSPH": ("buchner2002_P1_trixiparticles_wcsph.csv", {"H/40": 1, "H/80": 2, "H/320": 3}),
-         "Marrone et al. 2011 delta-SPH": ("buchner2002_P1_marrone2011_trixi.csv", {"H/40": 1, "H/80": 2, "H/320": 3})}
+         "Marrone et al. 2011 delta-SPH": ("buchner2002_P1_marrone2011_trixi.csv", {"H/40": 1, "H/80": 2, "H/320": 3}),
+         "De Courcy et al. 2024 delta-SPH": ("decourcy2024_P4_trixi.csv", {"H/400": 1})}
+# De Courcy et al. 2024's simulation at four heights on the right wall: {sample column: (y of the
+# sensor's centre in m, file)}; their P4 is P1 (the column p_star).
+REFERENCE = {"p_star_6mm": (0.006, "decourcy2024_P1_trixi.csv"), "p_star_30mm": (0.030, "decourcy2024_P2_trixi.csv"),
+             "p_star_60mm": (0.060, "decourcy2024_P3_trixi.csv"), "p_star": (SENSOR_Y, "decourcy2024_P4_trixi.csv")}
 
 SETTINGS = {  # what `sphcore validate dam-break-pressure` runs
     "resolution": 40,  # particles per H
@@ -97,6 +109,30 @@ def read_peers():
         data = np.loadtxt(DATA_DIR / name, delimiter=",", comments="#", ndmin=2)
         for label, column in columns.items():
             out[f"{peer} {label}"] = (data[:, 0], data[:, column])
+    return out
+
+
+def read_reference():
+    """{sample column: (t*, p*)} of REFERENCE."""
+    out = {}
+    for column, (_, name) in REFERENCE.items():
+        data = np.loadtxt(DATA_DIR / name, delimiter=",", comments="#", ndmin=2)
+        out[column] = (data[:, 0], data[:, 1])
+    return out
+
+
+def reference_errors(rows):
+    """{sample column: metrics} of the sampled rows against REFERENCE: the RMS of ours minus theirs at
+    their times up to RMS_UNTIL, and the impact peaks (IMPACT_WINDOW) of both."""
+    t = np.array([r["t_star"] for r in rows])
+    out = {}
+    for column, (t_ref, p_ref) in read_reference().items():
+        p = np.array([r[column] for r in rows])
+        rms, count = rms_against(t, p, t_ref, p_ref)
+        (pt, pp), (pt_ref, pp_ref) = impact_peak(t, p), impact_peak(t_ref, p_ref)
+        out[column] = {"y": REFERENCE[column][0], "rms_p_star": rms, "rms_points": count,
+                       "rms_p_star_calm": rms_against(t, p, t_ref, p_ref, CALM_UNTIL)[0], "peak_t_star": pt,
+                       "peak_p_star": pp, "reference_peak_t_star": pt_ref, "reference_peak_p_star": pp_ref}
     return out
 
 
@@ -242,14 +278,19 @@ def run_buchner(settings=None, out_dir=None, progress=True):
     lo, hi = scene["domain.box_min"], scene["domain.box_max"]
 
     def sample(state, t):
-        p = wall_pressure(state["particle_x"], state["particle_p"], sensor, scene.h, lo, hi)
-        return {"t": t, "t_star": t * scale, "p_star": p / (RHO0 * G * H)}
+        row = {"t": t, "t_star": t * scale}
+        for column, (y, _) in sorted(REFERENCE.items(), key=lambda item: item[1][0] != SENSOR_Y):  # p_star first
+            p = wall_pressure(state["particle_x"], state["particle_p"], (sensor[0], y), scene.h, lo, hi)
+            row[column] = p / (RHO0 * G * H)
+        return row
 
     rows, info = sample_run(scene, s["backend"], s["t_end_star"] / scale, SAMPLE_DT_STAR / scale, sample,
                             progress, f"dam break pressure [{s['backend']}]", s.get("device"))
     summary = {"settings": s, "configuration": configs.overrides(s), **info, "dt": dt_estimate(scene), "h": scene.h,
                "sensor": sensor, **errors([r["t_star"] for r in rows], [r["p_star"] for r in rows]),
-               "peers": peer_errors()}
+               "peers": peer_errors(), "reference": reference_errors(rows)}
+    summary["rms_p_star_reference"] = summary["reference"]["p_star"]["rms_p_star"]
+    summary["rms_p_star_reference_calm"] = summary["reference"]["p_star"]["rms_p_star_calm"]
     if out_dir is not None:
         write_results(rows, summary, out_dir)
     if info["error"]:
@@ -294,7 +335,8 @@ def write_results(rows, summary, out_dir, name="dam_break_pressure"):
 
 
 def plot(rows, summary, path):
-    """p*(t*) at P1: each sample, its running mean and the measured series, as a PNG."""
+    """p*(t*) at P1: each sample, its running mean, the measured series and the peers'; below, every
+    sensor beside De Courcy et al.'s simulation (REFERENCE); as a PNG."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -302,14 +344,16 @@ def plot(rows, summary, path):
     t_exp, p_exp, header = read_measured()
     t = np.array([r["t_star"] for r in rows])
     p = np.array([r["p_star"] for r in rows])
-    fig, ax = plt.subplots(figsize=(10, 4.6), dpi=110)
+    fig = plt.figure(figsize=(11, 7.4), dpi=110)
+    grid = fig.add_gridspec(2, len(REFERENCE), height_ratios=(1.6, 1))
+    ax = fig.add_subplot(grid[0, :])
     ax.plot(t, p, color="0.6", lw=0.6, label="sphcore, each sample")
     if len(t) > 1:
         ax.plot(t, running_mean(t, p), "k-", lw=1.2, label=f"sphcore, running mean over {SMOOTH_STAR:g}")
     peers = summary.get("peers") or {}
     for (label, (tp, pp)), color in zip(read_peers().items(), ("tab:blue", "tab:cyan", "tab:purple", "tab:green",
-                                                                 "tab:olive", "tab:orange")):
-        if label.endswith("H/40") or label.endswith("H/320"):  # the coarsest and finest of each peer
+                                                                 "tab:olive", "tab:orange", "tab:brown")):
+        if label.endswith(("H/40", "H/320", "H/400")):  # the coarsest and finest of each peer
             rms = peers.get(label, {}).get("rms_p_star", math.nan)
             ax.plot(tp, pp, "-", color=color, lw=0.8, alpha=0.8, label=f"{label} (RMS {rms:.3f})")
     ax.plot(t_exp, p_exp, "o", color="tab:red", ms=3.5, mfc="none", label="Buchner 2002 (P1, as TrixiParticles extracted it)")
@@ -326,6 +370,21 @@ def plot(rows, summary, path):
                                150), fontsize=8)
     ax.legend(fontsize=7, loc="upper right")
     ax.grid(True, lw=0.3, alpha=0.5)
+    reference, metrics = read_reference(), summary.get("reference") or {}
+    for k, column in enumerate(sorted(REFERENCE, key=lambda c: REFERENCE[c][0])):
+        sub = fig.add_subplot(grid[1, k])
+        if column in rows[0]:
+            sub.plot(t, [r[column] for r in rows], color="0.4", lw=0.6, label="sphcore")
+        sub.plot(*reference[column], color="tab:brown", lw=0.9, label="De Courcy et al. 2024")
+        y, m = REFERENCE[column][0], metrics.get(column, {})
+        sub.set(xlim=(2.0, 7.2), xlabel="t*", title=f"y = {1000 * y:g} mm: RMS {m.get('rms_p_star', math.nan):.3f} "
+                                                    f"({m.get('rms_p_star_calm', math.nan):.3f} to t* {CALM_UNTIL:g})")
+        sub.title.set_fontsize(8)
+        sub.tick_params(labelsize=7)
+        sub.grid(True, lw=0.3, alpha=0.5)
+        if k == 0:
+            sub.set_ylabel("p*")
+            sub.legend(fontsize=7)
     fig.tight_layout()
     atomic_savefig(fig, path)
     plt.close(fig)
