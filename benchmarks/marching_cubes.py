@@ -6,7 +6,8 @@ and 512^3. Contenders, each timed on the same volume:
 
 - sphcore on Vulkan (the GPU): "histopyramid" (classify, reduce, write the indirect dispatch,
   emit: no readback), "histopyramid_readback" (the vertex count read to the host, then a
-  direct dispatch: two submits) and "per_cube" (one invocation per cube, atomic counter).
+  direct dispatch: two submits) and "per_cube" (emit_cubes: runs of cubes along z, one atomic per
+  subgroup, sphcore.surface.default_cube_run's run length; with --cube-runs, "per_cube_run<k>" for each).
   The volume stays on the device; --repeat extractions are recorded into one command buffer
   (readback: two submits each) and the wall time between submit and fence is divided by them.
 - sphcore on numba: the same stages' mirrors, "histopyramid" and "per_cube" (triangle soup),
@@ -77,15 +78,16 @@ def time_numba(volume, repeat):
     return out
 
 
-def time_vulkan(volume, repeat):
+def time_vulkan(volume, repeat, cube_runs=()):
     """GPU time per extraction with the volume resident on the device (see the module docstring)."""
-    from sphcore.surface import Extractor
-    out = {}
-    for method, readback in (("histopyramid", False), ("histopyramid", True), ("per_cube", False)):
-        with Extractor(volume.shape, backend="vulkan", method=method) as extractor:
+    from sphcore.surface import Extractor, default_cube_run
+    out = {"cube_run": default_cube_run(volume.shape)}
+    for method, readback, run in ([("histopyramid", False, None), ("histopyramid", True, None), ("per_cube", False, None)]
+                                  + [("per_cube", False, k) for k in cube_runs]):
+        with Extractor(volume.shape, backend="vulkan", method=method, cube_run=run) as extractor:
             soup = extractor.extract(volume, 1.0)  # sizes the output for this surface
             device, stages = extractor.device, extractor.stages()
-            name = method + ("_readback" if readback else "")
+            name = method + ("_readback" if readback else "") + (f"_run{run}" if run else "")
             if readback:
                 first = device.record(stages[:-1]).end()
 
@@ -149,6 +151,8 @@ def main(argv=None):
     parser.add_argument("--sizes", default="seed2,256,512",
                         help="comma list: seed2 (its five grids) or N (an N^3 grid)")
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--cube-runs", default="", help="comma list of emit_cubes run lengths to time beside the "
+                        "default (vulkan), e.g. 1,2,4,8: how sphcore.surface.default_cube_run was chosen")
     parser.add_argument("--out", help="JSON file for the results")
     args = parser.parse_args(argv)
     contenders = [c for c in args.contenders.split(",") if c]
@@ -165,7 +169,8 @@ def main(argv=None):
         if shape in SEED2_MS:
             row["seed2_gtx560_ms"] = dict(zip(("per_cube", "histopyramid"), SEED2_MS[shape]))
         for name in contenders:
-            row[name] = TIMERS[name](volume, args.repeat)
+            runs = [int(k) for k in args.cube_runs.split(",") if k]
+            row[name] = TIMERS[name](volume, args.repeat, runs) if name == "vulkan" else TIMERS[name](volume, args.repeat)
             print(f"{'x'.join(map(str, shape)):>12} {name:8} {json.dumps(row[name])}", flush=True)
         results.append(row)
     report = {"benchmark": "marching cubes, five metaballs at level 1", "repeat": args.repeat,

@@ -8,8 +8,9 @@ It runs the shaders in shaders/mc/ through Vulkan or their numba mirrors:
 - "histopyramid": classify_cubes (case and vertex count per cube), reduce_cubes per level,
   write_arguments (the indirect dispatch, on the device), emit_vertices (one invocation per
   output vertex walks the pyramid down to its cube);
-- "per_cube": emit_cubes, one invocation per cube with an atomic output counter (seed 2's
-  geometry-shader baseline).
+- "per_cube": emit_cubes, seed 2's geometry-shader baseline (a cube's vertices written where an
+  atomic output counter puts them) as a GPU's subgroups run it: one invocation per run of
+  `cube_run` cubes along z, one atomic per subgroup, one lane per vertex.
 
 Both emit 3 vertices per triangle, each with a key naming its grid edge; `weld` merges the
 vertices of equal keys, so each vertex is shared, as in scikit-image's output. `Extractor`
@@ -47,7 +48,7 @@ MC_BUFFERS = {
     "case_edges": (np.uint32, 1, 256 * CASE_WIDTH),
 }
 
-# stage -> (mirror factory, invocations: "samples" | "cubes" | "nodes" | "one" | "indirect", buffers in order)
+# stage -> (mirror factory, invocations: "samples" | "cubes" | "runs" | "nodes" | "one" | "indirect", buffers in order)
 MC_STAGES = {
     "sample_field": (sample_field, "samples", ("volume", "particle_x", "particle_rho", "cell_pyramid",
                                                "cell_start")),
@@ -56,7 +57,7 @@ MC_STAGES = {
     "write_arguments": (write_arguments, "one", ("cube_pyramid", "arguments")),
     "emit_vertices": (emit_vertices, "indirect", ("volume", "cube_case", "cube_pyramid", "arguments",
                                                   "vertex_position", "vertex_normal", "vertex_key", "case_edges")),
-    "emit_cubes": (emit_cubes, "cubes", ("volume", "arguments", "vertex_position", "vertex_normal", "vertex_key",
+    "emit_cubes": (emit_cubes, "runs", ("volume", "arguments", "vertex_position", "vertex_normal", "vertex_key",
                                          "case_vertices", "case_edges")),
 }
 
@@ -78,6 +79,15 @@ def mc_parameters(shape, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), isolev
         for name in ("box_min", "box_max", "inv_cell", "grid_dim", "cell_total", "n", "h", "h2", "density_coef"):
             p[name] = sph[name]
     return params
+
+
+def default_cube_run(shape):
+    """emit_cubes' cubes per invocation for a volume of `shape`, as measured on the H200
+    (benchmarks/marching_cubes.py --cube-runs): runs of 4 from RUN_FROM cubes, single cubes below."""
+    return 4 if int(np.prod([k - 1 for k in shape])) >= RUN_FROM else 1
+
+
+RUN_FROM = 1 << 21
 
 
 def stage_params(params, level):
@@ -105,22 +115,28 @@ class Extractor:
 
     midpoint: vertices at edge midpoints (else by linear interpolation);
     forward_normals: normals by forward differences (else central);
+    cube_run: per_cube's cubes per invocation, a run along z (None: default_cube_run(shape));
     particles, cells, sph, spec: sizes and parameters for sample_field (the colour field).
     """
 
     def __init__(self, shape, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), backend="numba",
-                 method="histopyramid", midpoint=False, forward_normals=False, local_size=128,
+                 method="histopyramid", midpoint=False, forward_normals=False, local_size=128, cube_run=None,
                  particles=0, cells=0, sph=None, spec=DEFAULT_SPEC, device=None, validation=None):
         check_shape(shape)
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}: choose one of {', '.join(METHODS)}")
         self.shape, self.method, self.local_size = tuple(int(k) for k in shape), method, local_size
         cube_total = int(np.prod([k - 1 for k in self.shape]))
-        self.sizes = {"samples": int(np.prod(self.shape)), "cubes": cube_total,
+        run = 1 if method != "per_cube" else default_cube_run(self.shape) if cube_run is None else cube_run
+        if not (isinstance(run, (int, np.integer)) and run >= 1):
+            raise ValueError(f"cube_run must be a positive integer (cubes per invocation), got {cube_run!r}")
+        nx, ny, nz = (k - 1 for k in self.shape)
+        self.sizes = {"samples": int(np.prod(self.shape)), "cubes": cube_total, "runs": nx * ny * -(-nz // int(run)),
                       "pyramid": pyramid_levels(cube_total)[1], "capacity": min(15 * cube_total, 1 << 20),
                       "particles": particles, "cells": cells}
         self.params = mc_parameters(self.shape, spacing, origin, 0.0, self.sizes["capacity"], sph)
-        self.spec, self.mc_spec = spec._replace(GRID=True), McSpec(MIDPOINT=midpoint, FORWARD_NORMALS=forward_normals)
+        self.spec = spec._replace(GRID=True)
+        self.mc_spec = McSpec(MIDPOINT=midpoint, FORWARD_NORMALS=forward_normals, CUBE_RUN=int(run))
         if backend not in ("numba", "vulkan"):
             raise ValueError(f"unknown backend {backend!r}: choose numba or vulkan")
         self.device = VulkanDevice(self, device, validation) if backend == "vulkan" else NumbaDevice(self)
@@ -234,9 +250,13 @@ class VulkanDevice:
     extraction, emit_vertices dispatched indirectly from the arguments the device wrote."""
 
     def __init__(self, extractor, device=None, validation=None):
-        from sphcore.vk_runner import Context
+        from sphcore.vk_runner import Context, VulkanError
         self.x = extractor
         self.ctx = Context(device=device, validation=validation)
+        if extractor.method == "per_cube" and not self.ctx.subgroup_operations:
+            self.ctx.close()
+            raise VulkanError(f"{self.ctx.device_name} lacks the subgroup operations that per_cube's emit_cubes uses "
+                              "(arithmetic, ballot and shuffle in compute shaders): use method=\"histopyramid\"")
         self.buffers = {name: self._buffer(name) for name in MC_BUFFERS}
         self.pipelines = {}
         self.recordings = {}

@@ -11,6 +11,12 @@ that does is mirrored with one local loop per phase). A body with atomics is lau
 `parallel=False`: every invocation then runs in index order, which is one of the orders the
 GPU may choose, and the fixed one. There is no FMA contraction, which a GPU compiler may apply.
 
+Subgroup operations (subgroupAdd, subgroupBallot, subgroupShuffle...) end a phase as a barrier does:
+the mirror runs a subgroup's invocations one phase at a time, with the locals that outlive a phase in
+arrays indexed by the lane, and computes each operation as the loop over the lanes that defines it. The
+mirror fixes the subgroup size (32 in sphcore/mc/emit_cubes.py); a shader may use subgroups only where
+the size changes no result but an order the host does not depend on (GPUs have 4 to 128 lanes).
+
 Shaders take their compile-time choices as specialization constants; a mirror module
 exposes a factory `stage(spec, real)` that builds its body with those values as closure
 constants (numba compiles them in, so a disabled term costs nothing), cached per `spec` and

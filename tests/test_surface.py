@@ -202,6 +202,44 @@ def test_output_too_small_is_enlarged_not_truncated(backend, method):
     assert np.array_equal(canonical(faces), canonical(expected[1]))
 
 
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
+@pytest.mark.parametrize("cube_run", [1, 3, 4, 40])
+def test_per_cube_runs_give_the_same_mesh(backend, cube_run):
+    """emit_cubes with runs of 1, 3, 4 and 40 cubes along z (31 cubes per row: runs cut short at the row's
+    end, and one run longer than the row) gives numba's HistoPyramid triangles, also with room for only
+    8 vertices at first (enlarged, not cut); on Vulkan, with the subgroup operations of the GPU's
+    subgroup size, on numba with the mirror's 32."""
+    volume = metaballs((20, 25, 32))
+    expected = extract(volume, 1.0)
+    verts, faces, normals = extract(volume, 1.0, backend=backend, method="per_cube", cube_run=cube_run)
+    assert np.array_equal(canonical(faces), canonical(expected[1]))
+    assert np.abs(verts - expected[0]).max() < 1e-5 and np.abs(normals - expected[2]).max() < 1e-5
+    with Extractor(volume.shape, backend=backend, method="per_cube", cube_run=cube_run) as extractor:
+        assert extractor.sizes["runs"] == 19 * 24 * -(-31 // cube_run)
+        extractor.resize(7)
+        again = weld(*extractor.extract(volume, 1.0))
+    assert np.array_equal(canonical(again[1]), canonical(expected[1]))
+
+
+def test_per_cube_run_length_is_checked_and_chosen_by_size():
+    from sphcore.surface import RUN_FROM, default_cube_run
+    for bad in (0, -2, 2.5, "4"):
+        with pytest.raises(ValueError, match="cube_run"):
+            Extractor((8, 8, 8), method="per_cube", cube_run=bad)
+    assert default_cube_run((8, 8, 8)) == 1 and default_cube_run((129, 129, 129)) == 4
+    assert default_cube_run((2, 2, RUN_FROM)) == 1 and default_cube_run((2, 2, RUN_FROM + 1)) == 4
+
+
+def test_per_cube_on_a_device_without_subgroup_operations_says_so(monkeypatch):
+    vulkan_or_skip()
+    from sphcore.vk_runner import Context, VulkanError
+    monkeypatch.setattr(Context, "_supports_subgroup_operations", lambda self: False)
+    with pytest.raises(VulkanError, match="subgroup operations.*histopyramid"):
+        Extractor((8, 8, 8), backend="vulkan", method="per_cube")
+    with Extractor((8, 8, 8), backend="vulkan", method="histopyramid") as extractor:  # the other method needs none
+        assert len(extractor.extract(sphere((8, 8, 8), (3.5, 3.5, 3.5), 2.5), 0.0)[2]) > 0
+
+
 def test_bad_input_is_rejected_with_what_and_where():
     volume = sphere()
     with pytest.raises(ValueError, match="3D volume"):

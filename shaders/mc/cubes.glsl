@@ -18,6 +18,11 @@ uvec3 cube_origin(uint c) {
     return uvec3(c / (ny * nz), c / nz % ny, c % nz);
 }
 
+// Index of the cube with corner 0 at sample s (cube_origin's inverse).
+uint cube_index(uvec3 s) {
+    return (s.x * (P.dim.y - 1u) + s.y) * (P.dim.z - 1u) + s.z;
+}
+
 // Offset of corner k from corner 0 of its cube.
 uvec3 corner_offset(uint k) {
     return uvec3(k & 1u, (k >> 1) & 1u, (k >> 2) & 1u);
@@ -30,6 +35,20 @@ uint classify(uvec3 s) {
         if (volume[sample_index(s + corner_offset(k))] > P.isolevel) code |= 1u << k;
     }
     return code;
+}
+
+// The bits of corners 0-3 (a cube's face at its lowest z) of the cube with corner 0 at sample s:
+// classify(s) is cube_face(s) | cube_face(s + (0, 0, 1)) << 4.
+uint cube_face(uvec3 s) {
+    uint i = sample_index(s);
+    uint x = P.dim.y * P.dim.z;
+    uint y = P.dim.z;
+    uint face = 0u;
+    if (volume[i] > P.isolevel) face |= 1u;
+    if (volume[i + x] > P.isolevel) face |= 2u;
+    if (volume[i + y] > P.isolevel) face |= 4u;
+    if (volume[i + x + y] > P.isolevel) face |= 8u;
+    return face;
 }
 
 // Gradient of the volume at sample s: central differences, one-sided on the volume's faces

@@ -32,6 +32,12 @@ def cube_origin(P, c):
 
 
 @njit(inline="always")
+def cube_index(P, s_x, s_y, s_z):
+    """Index of the cube with corner 0 at sample s (cube_origin's inverse)."""
+    return (s_x * (int(P.dim[1]) - 1) + s_y) * (int(P.dim[2]) - 1) + s_z
+
+
+@njit(inline="always")
 def corner_offset(k):
     """Offset of corner k from corner 0 of its cube."""
     return k & 1, (k >> 1) & 1, (k >> 2) & 1
@@ -46,6 +52,25 @@ def classify(P, volume, s_x, s_y, s_z):
         if volume[sample_index(P, s_x + o_x, s_y + o_y, s_z + o_z)] > P.isolevel:
             code |= 1 << k
     return code
+
+
+@njit(inline="always")
+def cube_face(P, volume, s_x, s_y, s_z):
+    """The bits of corners 0-3 (a cube's face at its lowest z) of the cube with corner 0 at sample s:
+    classify(s) is cube_face(s) | cube_face(s + (0, 0, 1)) << 4."""
+    i = sample_index(P, s_x, s_y, s_z)
+    x = int(P.dim[1]) * int(P.dim[2])
+    y = int(P.dim[2])
+    face = 0
+    if volume[i] > P.isolevel:
+        face |= 1
+    if volume[i + x] > P.isolevel:
+        face |= 2
+    if volume[i + y] > P.isolevel:
+        face |= 4
+    if volume[i + x + y] > P.isolevel:
+        face |= 8
+    return face
 
 
 @lru_cache(maxsize=None)

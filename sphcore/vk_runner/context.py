@@ -328,6 +328,7 @@ class Context:
         self.device_type = self._type_name(props.deviceType)
         self.max_storage_buffer_range = int(props.limits.maxStorageBufferRange)
         self.shader_float64 = self._supports_float64()
+        self.subgroup_operations = self._supports_subgroup_operations()
         if float64 and not self.shader_float64:
             raise VulkanError(f"{self.device_name} has no float64 in shaders (shaderFloat64): set "
                               'physics.precision = "float32", pick another device, or run with --backend numba')
@@ -411,6 +412,18 @@ class Context:
     def _supports_float64(self):
         """Whether the chosen device runs shaders with doubles (feature shaderFloat64)."""
         return bool(self.vk.vkGetPhysicalDeviceFeatures(self.physical_device).shaderFloat64)
+
+    def _supports_subgroup_operations(self):
+        """Whether compute shaders on the chosen device have the subgroup operations the per-cube
+        marching cubes uses (basic, arithmetic, ballot, shuffle; Vulkan 1.1's subgroup properties)."""
+        vk = self.vk
+        subgroup = vk.VkPhysicalDeviceSubgroupProperties(sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES)
+        vk.vkGetPhysicalDeviceProperties2(self.physical_device, vk.VkPhysicalDeviceProperties2(
+            sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, pNext=subgroup))
+        wanted = (vk.VK_SUBGROUP_FEATURE_BASIC_BIT | vk.VK_SUBGROUP_FEATURE_ARITHMETIC_BIT
+                  | vk.VK_SUBGROUP_FEATURE_BALLOT_BIT | vk.VK_SUBGROUP_FEATURE_SHUFFLE_BIT)
+        return bool(subgroup.supportedStages & vk.VK_SHADER_STAGE_COMPUTE_BIT
+                    and subgroup.supportedOperations & wanted == wanted)
 
     def _type_name(self, device_type):
         vk = self.vk
