@@ -8,6 +8,7 @@ import re
 
 import numba
 import numpy as np
+import pytest
 
 from sphcore.cli import main
 from sphcore.validate import report, sweep
@@ -110,3 +111,31 @@ def test_report_runs_the_dam_break_where_it_is_missing(tmp_path, monkeypatch):
     # a second report reads what the first one ran
     report.build_report(tmp_path)
     assert len(calls) == 1 and "Read from" in path.read_text()
+
+
+def test_front_convergence_measures_the_differences_between_resolutions(tmp_path):
+    """Fronts Z(T) = 1 + T + 0.8 sin(T) / resolution at 20, 40 and 80: successive RMS differences halve
+    (observed order 1), the coarsest's distance from the finest is the sum of the steps; a run that
+    stopped early, or a configuration at one resolution, gives no row."""
+    from sphcore.validate.report import front_convergence
+
+    runs = []
+    T = np.linspace(0.0, 3.0, 301)
+    for config, resolutions in (("engineering", (20, 40, 80)), ("graphics", (40,))):
+        for resolution in resolutions:
+            folder = tmp_path / f"{config}_{resolution}"
+            folder.mkdir()
+            Z = 1 + T + 0.8 * np.sin(T) / resolution
+            (folder / "dam_break_2d.csv").write_text("T,Z\n" + "".join(f"{t},{z}\n" for t, z in zip(T, Z)))
+            summary = {"settings": {"config": config, "resolution": resolution, "backend": "numba"},
+                       "rms_Z_table2": 0.1, "error": None}
+            runs.append((folder / "dam_break_2d.json", summary))
+    runs.append((tmp_path / "stopped" / "dam_break_2d.json", {"settings": {"config": "engineering", "resolution": 160},
+                                                              "rms_Z_table2": 0.1, "error": "blow-up at step 9"}))
+    rows = front_convergence(runs)
+    assert [r["resolutions"] for r in rows] == ["20 -> 40", "40 -> 80"]
+    sine = 0.8 * np.sqrt(np.mean(np.sin(np.linspace(0.0, 3.0, 200)) ** 2))
+    assert rows[0]["RMS of Z between them"] == pytest.approx(sine * (1 / 20 - 1 / 40), rel=1e-3)
+    assert rows[1]["RMS of Z between them"] == pytest.approx(sine * (1 / 40 - 1 / 80), rel=1e-3)
+    assert rows[0]["RMS of Z from the finest (80)"] == pytest.approx(sine * (1 / 20 - 1 / 80), rel=1e-3)
+    assert rows[0]["observed order"] is None and rows[1]["observed order"] == pytest.approx(1.0, abs=1e-3)
