@@ -5,9 +5,11 @@ The tank of `sphcore validate tank` (sphcore.validate.tank: 1 m wide, 0.6 m deep
 physics.pressure_solver = "dfsph", run for --t-end seconds on --backend. Printed and written as JSON
 (--out): the solver log's errors and iterations per step, the particles' mean compression
 max(rho / rho_0 - 1, 0) at every sample, the speed left (largest, 99th percentile, median), and the
-pressure slope against rho_0 g.
+pressure slope against rho_0 g. --relaxation, --kernel and --smoothing-ratio set fluid.relaxation,
+physics.kernel and fluid.smoothing_ratio (the tank's own: 1, mueller, 2).
 
     .venv/bin/python benchmarks/dfsph_tank.py --resolution 30 --t-end 2 --out /tmp/dfsph_tank.json
+    .venv/bin/python benchmarks/dfsph_tank.py --kernel wendland_c2 --relaxation 0.8 --out /tmp/relaxed.json
 """
 import argparse
 import json
@@ -27,14 +29,19 @@ def main():
     ap.add_argument("--backend", default="numba")
     ap.add_argument("--max-density-error", type=float, default=0.001)
     ap.add_argument("--dt-fraction", type=float, default=1.0, help="of the largest step (time.dt_fraction)")
+    ap.add_argument("--relaxation", type=float, default=1.0, help="fluid.relaxation (omega)")
+    ap.add_argument("--kernel", default="mueller", help="physics.kernel")
+    ap.add_argument("--smoothing-ratio", type=float, default=2.0, help="fluid.smoothing_ratio (h / dx)")
     ap.add_argument("--out")
     args = ap.parse_args()
-    base = tank_scene({"resolution": args.resolution})
+    base = tank_scene({"resolution": args.resolution, "smoothing_ratio": args.smoothing_ratio})
     config = json.loads(base.to_json())
     config["physics"]["pressure_solver"] = "dfsph"
     config["fluid"]["max_density_error"] = args.max_density_error
     config["time"]["dt"] = "auto"
     config["time"]["dt_fraction"] = args.dt_fraction
+    config["fluid"]["relaxation"] = args.relaxation
+    config["physics"]["kernel"] = args.kernel
     scene = Scene.from_dict(config)
     rho0 = scene["fluid.rest_density"]
     samples, wall = [], 0.0
@@ -67,7 +74,8 @@ def main():
         "speed_max_second_half": max(r[3] for r in second),
         "speed_p99_second_half": max(r[4] for r in second),
         "speed_median_second_half": max(r[5] for r in second),
-        "pressure_slope_over_rho0_g": slope,
+        "pressure_slope_over_rho0_g": slope, "relaxation": args.relaxation, "kernel": args.kernel,
+        "smoothing_ratio": args.smoothing_ratio,
     }
     print(json.dumps(result, indent=1))
     if args.out:

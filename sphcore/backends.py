@@ -127,7 +127,7 @@ STAGES = {
     "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
-                                                 "dfsph_control", "particle_kappa", "dfsph_neighbours",
+                                                 "dfsph_control", "dfsph_state", "particle_kappa", "dfsph_neighbours",
                                                  "dfsph_neighbour_count", "dfsph_gradients")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "obstacle_box", "time_state", "particle_residual",

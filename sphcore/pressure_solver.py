@@ -13,7 +13,7 @@ import numpy as np
 from sphcore.simulation import SimulationError
 from sphcore.sph.dfsph import (CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES, CONTROL_MAX_ITERATIONS,
                                CONTROL_OVERFLOW_STEP, CONTROL_RUNNING, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE,
-                               STATE_FAILED_ERROR, STATE_TOLERANCE)
+                               STATE_FAILED_ERROR, STATE_RELAXATION, STATE_TOLERANCE)
 
 LOG_COLUMNS = ("step", "dt", "time", "divergence_iterations", "divergence_error", "density_iterations",
                "density_error", "converged")
@@ -27,7 +27,7 @@ class ConvergenceWarning(UserWarning):
 
 def init_state(state, scene):
     """Write the scene's solver settings into `state` (of backends.empty_state, its positions set): the
-    iteration budget into dfsph_control, the two tolerances into dfsph_state; and the stiffness sum
+    iteration budget into dfsph_control, the two tolerances and the relaxation into dfsph_state; and the stiffness sum
     kappa = p / rho_0 of the hydrostatic pressure (Scene.hydrostatic_pressure) into particle_kappa, so
     that the first step's warm start holds part of the column up, as every later step's does (from
     zero, a Jacobi solve needs about as many iterations as the column is particles tall)."""
@@ -37,6 +37,7 @@ def init_state(state, scene):
     state["dfsph_control"][CONTROL_RUNNING] = 1  # (the predicate of the Vulkan host's windows: dfsph.glsl)
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DIVERGENCE] = scene["fluid.max_divergence_error"]
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DENSITY] = scene["fluid.max_density_error"]
+    state["dfsph_state"][STATE_RELAXATION] = scene["fluid.relaxation"]
 
 
 class SolverLog:
@@ -60,12 +61,12 @@ class SolverLog:
                 raise RuntimeError(f"DFSPH history: row for step {step} holds step {int(row[0])}")
             self.rows[step] = row
         control = backend.read_buffer("dfsph_control")
-        if control[CONTROL_OVERFLOW_STEP]:
-            self.overflow(backend, int(control[CONTROL_OVERFLOW_STEP]), last)
         failures = int(control[CONTROL_FAILURES])
         if failures > self.reported:
             self.warn(control, backend.read_buffer("dfsph_state"), failures, last)
             self.reported = failures
+        if control[CONTROL_OVERFLOW_STEP]:
+            self.overflow(backend, int(control[CONTROL_OVERFLOW_STEP]), last)
 
     def overflow(self, backend, step, last):
         """Raise SimulationError for a neighbour list overflow first seen at `step` (the steps up to `last`
@@ -76,8 +77,9 @@ class SolverLog:
         raise SimulationError(
             f"step {step}: a particle had more neighbours and wall images within h than its neighbour list's "
             f"{self.scene.max_neighbours} slots (fluid.max_neighbours); at step {last} particle {particle} has "
-            f"{int(count[k])}. The solves would lose pairs, so the run stops here: raise fluid.max_neighbours, or "
-            "look for particles crowding together (a blow-up)")
+            f"{int(count[k])}. The solves would lose pairs, so the run stops here: "
+            + (f"likely cause: {self.diverged()}" if self.diverged() else
+               "raise fluid.max_neighbours, or look for particles crowding together (a blow-up)"))
 
     def warn(self, control, state, failures, last):
         scene = self.scene
@@ -91,10 +93,24 @@ class SolverLog:
             r = bad[-1]
             latest = (f"; the latest at step {int(r[0])} (t = {r[2]:.4g} s): divergence error {r[4]:.3g} after "
                       f"{int(r[3])} updates, density error {r[6]:.3g} after {int(r[5])}")
+        advice = self.diverged() or "raise fluid.max_iterations, lower time.cfl_number, or loosen the tolerance"
         warnings.warn(ConvergenceWarning(
             f"DFSPH did not converge within fluid.max_iterations = {scene['fluid.max_iterations']} in {failures} "
-            f"solve(s) up to step {last}; {first}{latest}. Raise fluid.max_iterations, lower time.cfl_number, or "
-            "loosen the tolerance"), stacklevel=3)
+            f"solve(s) up to step {last}; {first}{latest}. {advice[0].upper()}{advice[1:]}"), stacklevel=3)
+
+    def diverged(self):
+        """Where the latest unconverged step's solve ran away (its error above 1, a compression of 100 %, or
+        not finite: a Jacobi iteration that diverges), what to do; else None."""
+        unconverged = [r for s, r in sorted(self.rows.items()) if r[7] == 0 and s > 0]
+        if not unconverged:
+            return None
+        r = unconverged[-1]
+        for name, error, updates in (("divergence-free", r[4], r[3]), ("constant-density", r[6], r[5])):
+            if not np.isfinite(error) or error > 1.0:
+                return (f"the {name} solve diverged at step {int(r[0])} (error {error:.3g} after {int(updates)} "
+                        f"updates): lower fluid.relaxation (now {self.scene['fluid.relaxation']:g}; a support of 4 dx "
+                        "needs about 0.5)")
+        return None
 
     def array(self):
         """The rows in step order, (steps, len(LOG_COLUMNS)) float64."""

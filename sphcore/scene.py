@@ -157,6 +157,9 @@ SCHEMA = {
                                  "stops when the mean compression max(rho*/rho_0 - 1, 0) is at most this (0.001: 0.1 %)"),
         "max_divergence_error": Key(0.001, "-", 1e-6, 0.1, 'physics.pressure_solver = "dfsph": the divergence-free solve '
                                     "stops when the mean compression rate times dt is at most this"),
+        "relaxation": Key(1.0, "-", 0.05, 1.0, 'physics.pressure_solver = "dfsph": omega, the share of each Jacobi '
+                          "update the solves apply (1: Bender & Koschier's and SPlisHSPlasH's). Below 1 a solve takes "
+                          "more iterations and settles where 1 oscillates; a support of 4 dx needs about 0.5"),
         "max_iterations": Key(100, "-", 2, 1000, 'physics.pressure_solver = "dfsph": updates per solve and step at '
                               "most (recorded on the device); a solve that reaches it unconverged is reported", "int"),
         "max_neighbours": Key(0, "-", 0, 1024, 'physics.pressure_solver = "dfsph": slots of each particle\'s neighbour '

@@ -248,6 +248,8 @@ class Simulation:
                 cause = (f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s" if dt > dt_max else
                          f"time.dt = {dt:g} s is within the estimated bound {dt_max:.3g} s ({bound}); "
                          "look for stiffness or viscosity at the ends of their ranges")
+                if self.scene.dfsph:
+                    cause = self.solver_log.diverged() or cause
                 raise SimulationError(f"blow-up at step {self.step_count} (t = {self.time:.6g} s): {name} of "
                                       f"particle {i} is {values[i]} ({int(bad.sum())} particles non-finite); "
                                       f"likely cause: {cause}")

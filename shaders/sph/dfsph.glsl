@@ -93,6 +93,7 @@ uint list_slot(uint i, uint slot) { return LIST_BY_PARTICLE ? i * MAX_NEIGHBOURS
 const uint STATE_TOLERANCE = 0u;        // [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error
 const uint STATE_ERROR = 2u;            // [STATE_ERROR + solve]: the error the solve stopped at this step
 const uint STATE_FAILED_ERROR = 5u;     // the error the first unconverged solve stopped at
+const uint STATE_RELAXATION = 6u;       // fluid.relaxation (host): the share omega of each Jacobi update applied
 const uint STATE_SIZE = 8u;
 
 // dfsph_history (float, HISTORY_COLUMNS a row): one row per step, row (step - 1) % HISTORY_ROWS, written

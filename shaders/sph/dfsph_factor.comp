@@ -1,7 +1,8 @@
 #version 460
 // DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11), one invocation per particle, after
-// compute_density: alpha_i = 1 / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2), V = m / rho_0, over the
-// neighbours and their wall and obstacle images (as in compute_density). Also starts the step's two
+// compute_density: alpha_i = omega / (|sum_j V grad W_ij|^2 + sum_j |V grad W_ij|^2), V = m / rho_0, over the
+// neighbours and their wall and obstacle images (as in compute_density); omega = fluid.relaxation, the
+// share of each Jacobi update the solves apply (1: the paper's and SPlisHSPlasH's). Also starts the step's two
 // solves (dfsph.glsl): invocation 0 clears their done flags and iteration counts and sets their indirect
 // dispatches' work groups (one invocation per particle); every particle's
 // pressure is cleared and its stiffness sum scaled to the warm start (WARM_START). The sums walk the
@@ -26,6 +27,7 @@ layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 4) writeonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 22) writeonly buffer ParticleAlpha { real particle_alpha[]; };
 layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 25) readonly buffer DfsphState { float dfsph_state[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
@@ -76,10 +78,11 @@ void main() {
         sum_grad2 += g * g;
         if (GRADIENTS) dfsph_gradients[list_slot(i, slot)] = real4(-grad, 0.0);
     }
-    // [5] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
+    // [5] alpha_i, relaxed; 0 for a particle (nearly) alone, whose residual is 0 anyway
     real s = sum_grad.x * sum_grad.x + sum_grad.y * sum_grad.y + sum_grad.z * sum_grad.z + sum_grad2;
     real alpha = real(0.0);
     if (s > real(1e-6) / real(P.h2)) alpha = real(1.0) / s;
+    alpha *= real(dfsph_state[STATE_RELAXATION]);
     // [6] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
     //     (dfsph_velocity accumulates both)
     particle_alpha[i] = alpha;

@@ -54,6 +54,7 @@ def list_slots(spec):
 STATE_TOLERANCE = 0  # [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error
 STATE_ERROR = 2  # [STATE_ERROR + solve]: the error the solve stopped at this step
 STATE_FAILED_ERROR = 5  # the error the first unconverged solve stopped at
+STATE_RELAXATION = 6  # fluid.relaxation (host): the share omega of each Jacobi update applied
 STATE_SIZE = 8
 
 # dfsph_history (float32, HISTORY_COLUMNS a row)

@@ -1,5 +1,5 @@
-"""DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11), one invocation per particle, after
-compute_density; invocation 0 also starts the step's two solves (dfsph.py: their flags, counts and
+"""DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11) times omega = fluid.relaxation, one invocation per
+particle, after compute_density; invocation 0 also starts the step's two solves (dfsph.py: their flags, counts and
 indirect dispatches), and every particle's pressure starts from 0. The sums walk the particle's neighbour
 list, which compute_density's scan wrote and every sweep of the solves walks too (dfsph.py).
 
@@ -14,7 +14,8 @@ from numba import njit, prange
 from sphcore.numba_cache import cached
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, CONTROL_OVERFLOW_STEP, CONTROL_STEP,
-                               SOLVE_DENSITY, SOLVE_DIVERGENCE, WARM_START, dispatch_base, list_slots)
+                               SOLVE_DENSITY, SOLVE_DIVERGENCE, STATE_RELAXATION, WARM_START, dispatch_base,
+                               list_slots)
 from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
@@ -31,7 +32,7 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,
-                          particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
+                          particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
                           dfsph_gradients):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
@@ -83,11 +84,12 @@ def dfsph_factor(spec, real=np.float32):
                 dfsph_gradients[k, 1] = -grad_y
                 dfsph_gradients[k, 2] = -grad_z
                 dfsph_gradients[k, 3] = real(0.0)
-        # [5] alpha_i; 0 for a particle (nearly) alone, whose residual is 0 anyway
+        # [5] alpha_i, relaxed; 0 for a particle (nearly) alone, whose residual is 0 anyway
         s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
         alpha = real(0.0)
         if s > real(1e-6) / real(P.h2):
             alpha = real(1.0) / s
+        alpha *= real(dfsph_state[STATE_RELAXATION])
         # [6] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
         #     (dfsph_velocity accumulates both)
         particle_alpha[i] = alpha
@@ -100,11 +102,12 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_p, obstacle_box,
-               particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
+               particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
+               dfsph_gradients):
         for group in prange(n_groups):
             for lid in range(local_size):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, obstacle_box,
-                                  particle_alpha, dfsph_control, particle_kappa, dfsph_neighbours,
+                                  particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours,
                                   dfsph_neighbour_count, dfsph_gradients)
 
     return cached(launch)
