@@ -153,6 +153,8 @@ def add_physics_options(p):
     p.add_argument("--adaptive-dt", action="store_true", help='time.dt = "adaptive": the step chosen on the device')
     p.add_argument("--pressure-solver", choices=configs.choices("pressure_solver"), help="physics.pressure_solver "
                    "(dfsph: incompressible, dt from time.cfl_number on the particle speed)")
+    p.add_argument("--relaxation", type=positive(float), help="fluid.relaxation: DFSPH's share omega of each Jacobi "
+                   "update (0 < omega <= 1)")
 
 
 def add_commands(sub):

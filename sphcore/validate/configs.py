@@ -32,6 +32,7 @@ SWITCHES = {
     "wall_model": ("domain.wall_model", ("free_slip", "no_slip")),
     "integrator": ("time.integrator", ("symplectic_euler", "verlet")),
     "pressure_solver": ("physics.pressure_solver", ("state_equation", "dfsph")),  # issue 14
+    "relaxation": ("fluid.relaxation", None),  # DFSPH's omega
 }
 OPTIONS = (*SWITCHES, "adaptive_dt")  # the settings a case takes beside "config"
 ALPHA_KEY = "fluid.alpha"  # Monaghan's alpha of the artificial viscosity model
