@@ -137,5 +137,6 @@ def test_front_convergence_measures_the_differences_between_resolutions(tmp_path
     sine = 0.8 * np.sqrt(np.mean(np.sin(np.linspace(0.0, 3.0, 200)) ** 2))
     assert rows[0]["RMS of Z between them"] == pytest.approx(sine * (1 / 20 - 1 / 40), rel=1e-3)
     assert rows[1]["RMS of Z between them"] == pytest.approx(sine * (1 / 40 - 1 / 80), rel=1e-3)
-    assert rows[0]["RMS of Z from the finest (80)"] == pytest.approx(sine * (1 / 20 - 1 / 80), rel=1e-3)
+    assert rows[0]["finest"] == 80
+    assert rows[0]["RMS of Z from the finest"] == pytest.approx(sine * (1 / 20 - 1 / 80), rel=1e-3)
     assert rows[0]["observed order"] is None and rows[1]["observed order"] == pytest.approx(1.0, abs=1e-3)

@@ -293,11 +293,11 @@ MODEL_CASES = {  # case -> (what identifies its summary, its figures: (column, k
 
 
 def front_convergence(runs):
-    """Grid convergence of the Martin & Moyce front: for each configuration with runs at two or more
-    resolutions (on either backend: they agree, as tested) (each a dam_break_2d.json beside its .csv), the RMS of Z(T) between successive
-    resolutions and between each and the finest, over the T all of them cover (200 points), and the
-    observed order log2 of the ratio of successive differences. A solution that converges has differences
-    that shrink with resolution, whatever its distance from the experiment."""
+    """Grid convergence of the Martin & Moyce front: for each configuration and dimension with runs at two
+    or more resolutions (each a summary beside its CSV; on either backend, which agree, as tested), the RMS
+    of Z(T) between successive resolutions and between each and the finest, over the T all of them cover
+    (200 points), and the observed order, log2 of the ratio of successive differences. A solution that
+    converges has differences that shrink with resolution, whatever its distance from the experiment."""
     import numpy as np
 
     groups = {}
@@ -305,9 +305,10 @@ def front_convergence(runs):
         s = summary["settings"]
         csv_path = Path(path).with_suffix(".csv")
         if "rms_Z_table2" in summary and not summary.get("error") and csv_path.is_file():
-            groups.setdefault(s.get("config") or "graphics", {})[s.get("resolution")] = (csv_path, s.get("backend"))
+            key = (s.get("config") or "graphics", s.get("dimension") or 2)
+            groups.setdefault(key, {})[s.get("resolution")] = (csv_path, s.get("backend"))
     rows = []
-    for config, found in sorted(groups.items()):
+    for (config, dim), found in sorted(groups.items()):
         if len(found) < 2:
             continue
         series = {}
@@ -321,10 +322,10 @@ def front_convergence(runs):
         previous = None
         for coarse, fine in zip(resolutions, resolutions[1:]):
             step = float(np.sqrt(np.mean((Z[coarse] - Z[fine]) ** 2)))
-            rows.append({"configuration": config, "resolutions": f"{coarse} -> {fine}",
+            rows.append({"configuration": config, "dim": dim, "resolutions": f"{coarse} -> {fine}",
                          "backends": f"{found[coarse][1]}, {found[fine][1]}",
                          "RMS of Z between them": step,
-                         f"RMS of Z from the finest ({finest})": float(np.sqrt(np.mean((Z[coarse] - Z[finest]) ** 2))),
+                         "finest": finest, "RMS of Z from the finest": float(np.sqrt(np.mean((Z[coarse] - Z[finest]) ** 2))),
                          "observed order": math.log2(previous / step) if previous and step > 0 else None,
                          "T up to": float(T[-1])})
             previous = step
