@@ -29,6 +29,7 @@ from sphcore.sph.count_cells import count_cells
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP, CONTROL_WINDOW, HISTORY_ROWS,
                                NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START, dispatch_base)
 from sphcore.sph.dfsph_factor import dfsph_factor
+from sphcore.sph.dfsph_predict import dfsph_predict
 from sphcore.sph.dfsph_residual import dfsph_residual
 from sphcore.sph.dfsph_velocity import dfsph_velocity
 from sphcore.sph.gather_particles import gather_particles
@@ -82,6 +83,7 @@ BUFFERS = {
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
 # particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
+# scratch_v, the sort's scratch, holds v* = v + dt a during DFSPH's constant-density solve (dfsph_predict);
 # dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
 # dfsph_neighbours, dfsph_neighbour_count: each particle's neighbour list for the solves' sweeps, written by
 # dfsph_factor (spec.MAX_NEIGHBOURS slots a particle: "neighbours" is n times that, at least 1 word);
@@ -129,7 +131,8 @@ STAGES = {
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
                                                  "dfsph_control", "dfsph_state", "particle_kappa", "dfsph_neighbours",
                                                  "dfsph_neighbour_count", "dfsph_gradients")),
-    "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
+    "dfsph_predict": (dfsph_predict, "particles", ("particle_v", "particle_a", "scratch_v", "time_state")),
+    "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "scratch_v", "particle_rho",
                                                      "obstacle_box", "time_state", "particle_residual",
                                                      "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count",
                                                      "dfsph_gradients", "dfsph_control", "dfsph_state",
@@ -137,7 +140,8 @@ STAGES = {
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "obstacle_box", "time_state", "particle_alpha",
                                                      "particle_residual", "dfsph_control", "particle_kappa",
-                                                     "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_gradients")),
+                                                     "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_gradients",
+                                                     "scratch_v")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
                                            "time_state")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
@@ -174,9 +178,10 @@ def plan(scene):
     # the step's dt on the device (time.dt = "adaptive"), and the last step's for Verlet
     stages += [Stage("reduce_dt")] if spec.ADAPTIVE_DT else []
     stages += [Stage("choose_dt")] if spec.ADAPTIVE_DT or spec.VERLET else []
-    # (the warm start where the first residual finds compression, as SPlisHSPlasH's; then the solve)
-    stages += [Stage("dfsph_residual", SOLVE_DENSITY), Stage("dfsph_velocity", SOLVE_WARM_START)] + dfsph_solve(
-        SOLVE_DENSITY, iterations) if spec.DFSPH else []
+    # (v* = v + dt a once dt is known; the warm start where the first residual finds compression, as
+    # SPlisHSPlasH's; then the solve)
+    stages += [Stage("dfsph_predict"), Stage("dfsph_residual", SOLVE_DENSITY),
+               Stage("dfsph_velocity", SOLVE_WARM_START)] + dfsph_solve(SOLVE_DENSITY, iterations) if spec.DFSPH else []
     return stages + [Stage("integrate")]
 
 

@@ -5,7 +5,8 @@
 // continuity rate).
 //   divergence-free solve: r_i = max(d_i, 0) [1/s], with the velocity v;
 //   constant-density solve: r_i = max(rho_i / rho_0 + dt d_i - 1, 0), with v* = v + dt a (the velocity
-//   the step would integrate) and this step's dt (time_state, choose_dt.comp).
+//   the step would integrate: dfsph_predict and dfsph_velocity keep it in scratch_v) and this step's dt
+//   (time_state, choose_dt.comp).
 // Only compression is corrected (a free surface's density deficit is not a tension). Invocation 0 of
 // each work group sums the group's residuals in order into dfsph_partial, and counts the group as
 // finished; the last group to finish runs the solve's convergence test (dfsph_check.glsl) over every
@@ -28,8 +29,8 @@ layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; 
 
 layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
-layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 12) readonly buffer ScratchV { real4 particle_vstar[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_residual[]; };
 layout(std430, binding = 24) coherent buffer DfsphControl { uint dfsph_control[]; };
@@ -56,9 +57,9 @@ void main() {
     if (i < P.n) {
         // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
         real dt = real(time_state[0].x);
-        real kick = solve == SOLVE_DENSITY ? dt : real(0.0);
+        bool density = solve == SOLVE_DENSITY;
         real3 xi = particle_x[i].xyz;
-        real3 vi = particle_v[i].xyz + kick * particle_a[i].xyz;
+        real3 vi = density ? particle_vstar[i].xyz : particle_v[i].xyz;
         // [3] the walls and obstacle faces the images are mirrored across, as in compute_density
         real3 wall;
         uint mirrored = near_walls(xi, wall);
@@ -74,7 +75,7 @@ void main() {
             uint image;
             real3 g = listed_gradient(i, slot, xi, wall, inward, j, image);
             // [6] the neighbour's velocity; an image's mirrored on the flipped axes
-            real3 vk = particle_v[j].xyz + kick * particle_a[j].xyz;
+            real3 vk = density ? particle_vstar[j].xyz : particle_v[j].xyz;
             if (image != 0u) {
                 vk = real3((image & 1u) != 0u ? -vk.x : vk.x, (image & 2u) != 0u ? -vk.y : vk.y,
                            (image & 4u) != 0u ? -vk.z : vk.z);
@@ -84,7 +85,7 @@ void main() {
         }
         // [8] the residual: compression only
         residual = max(d, real(0.0));
-        if (solve == SOLVE_DENSITY) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
+        if (density) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
         // [9] store
         particle_residual[i] = residual;
     }

@@ -5,7 +5,7 @@
 // neighbour list (dfsph_factor: the neighbours and their wall and obstacle images; an image carries its
 // particle's s) is added to the velocity (divergence-free) or to the acceleration the step integrates
 // (constant density, which also accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's
-// m p_i / rho_i^2 = V s_i).
+// m p_i / rho_i^2 = V s_i, and keeps v* = v + dt a in scratch_v for the next residual: dfsph_predict).
 // Every invocation reads only the residuals and writes only its own particle: a Jacobi sweep.
 // Dispatched indirectly: no work groups once the solve has stopped; invocation 0 counts the update.
 // Mirror: sphcore/sph/dfsph_velocity.py (same names, same statement order, same step labels).
@@ -27,6 +27,7 @@ layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) buffer ParticleA { real4 particle_a[]; };
 layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
 layout(std430, binding = 4) buffer ParticleP { real particle_p[]; };
+layout(std430, binding = 12) writeonly buffer ScratchV { real4 particle_vstar[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 22) readonly buffer ParticleAlpha { real particle_alpha[]; };
 layout(std430, binding = 23) readonly buffer ParticleResidual { real particle_residual[]; };
@@ -76,7 +77,9 @@ void main() {
     if (solve == SOLVE_DIVERGENCE) {
         particle_v[i] = real4(particle_v[i].xyz + change, 0.0);
     } else {
-        particle_a[i] = real4(particle_a[i].xyz + change, 0.0);
+        real3 a = particle_a[i].xyz + change;
+        particle_a[i] = real4(a, 0.0);
+        particle_vstar[i] = real4(particle_v[i].xyz + dt * a, 0.0);
         real rhoi = particle_rho[i];
         real p = si * rhoi * rhoi / real(P.rest_density);
         if (!warm) p += particle_p[i];

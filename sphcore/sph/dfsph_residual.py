@@ -1,7 +1,8 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
 rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, each gradient as dfsph_factor computes it
 (stored in dfsph_gradients with GRADIENTS); divergence-free solve
-r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a;
+r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a (in
+scratch_v: dfsph_predict, dfsph_velocity);
 each work group's residuals summed in order into dfsph_partial; the last work group to finish runs the
 solve's convergence test (dfsph_check). Dispatched indirectly: no work groups once the solve has stopped.
 
@@ -35,7 +36,7 @@ def dfsph_residual(spec, real=np.float32):
     dfsph_check_share, dfsph_check_decide = dfsph_check(spec, real)
 
     @njit
-    def dfsph_residual_main(i, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
+    def dfsph_residual_main(i, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box, time_state,
                             particle_residual, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
@@ -46,13 +47,13 @@ def dfsph_residual(spec, real=np.float32):
             return residual
         # [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
         dt = real(time_state[0, 0])
-        kick = dt if solve == SOLVE_DENSITY else real(0.0)
+        density = solve == SOLVE_DENSITY
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
         xi_z = particle_x[i, 2]
-        vi_x = particle_v[i, 0] + kick * particle_a[i, 0]
-        vi_y = particle_v[i, 1] + kick * particle_a[i, 1]
-        vi_z = particle_v[i, 2] + kick * particle_a[i, 2]
+        vi_x = particle_vstar[i, 0] if density else particle_v[i, 0]
+        vi_y = particle_vstar[i, 1] if density else particle_v[i, 1]
+        vi_z = particle_vstar[i, 2] if density else particle_v[i, 2]
         # [3] the walls and obstacle faces the images are mirrored across, as in compute_density
         mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
@@ -66,9 +67,9 @@ def dfsph_residual(spec, real=np.float32):
             j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot, xi_x,
                                                       xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z)
             # [6] the neighbour's velocity; an image's mirrored on the flipped axes
-            vk_x = particle_v[j, 0] + kick * particle_a[j, 0]
-            vk_y = particle_v[j, 1] + kick * particle_a[j, 1]
-            vk_z = particle_v[j, 2] + kick * particle_a[j, 2]
+            vk_x = particle_vstar[j, 0] if density else particle_v[j, 0]
+            vk_y = particle_vstar[j, 1] if density else particle_v[j, 1]
+            vk_z = particle_vstar[j, 2] if density else particle_v[j, 2]
             if image != 0:
                 vk_x = -vk_x if (image & 1) != 0 else vk_x
                 vk_y = -vk_y if (image & 2) != 0 else vk_y
@@ -77,7 +78,7 @@ def dfsph_residual(spec, real=np.float32):
             d += (vi_x - vk_x) * g_x + (vi_y - vk_y) * g_y + (vi_z - vk_z) * g_z
         # [8] the residual: compression only
         residual = max(d, real(0.0))
-        if solve == SOLVE_DENSITY:
+        if density:
             residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0))
         # [9] store
         particle_residual[i] = residual
@@ -94,15 +95,15 @@ def dfsph_residual(spec, real=np.float32):
         dfsph_partial[group] = total
 
     @njit(parallel=True, error_model="numpy")
-    def launch(n_groups, local_size, params, particle_x, particle_v, particle_a, particle_rho, obstacle_box, time_state,
-               particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
+    def launch(n_groups, local_size, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box,
+               time_state, particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
                dfsph_control, dfsph_state, dfsph_history):
         groups = (int(params[0].n) + local_size - 1) // local_size
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
                 s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
-                                                      particle_a, particle_rho, obstacle_box, time_state,
+                                                      particle_vstar, particle_rho, obstacle_box, time_state,
                                                       particle_residual, dfsph_neighbours, dfsph_neighbour_count,
                                                       dfsph_gradients)
             # (barrier)

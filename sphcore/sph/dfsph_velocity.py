@@ -2,7 +2,8 @@
 -sum_j V (s_i + s_j) grad W_ij over its neighbour list, each gradient as dfsph_factor computes it (stored in
 dfsph_gradients with GRADIENTS), s_j = alpha_j r_j (divergence-free)
 or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
-with the pressure accumulated (constant density). Dispatched indirectly: no work groups once the solve has stopped
+with the pressure accumulated and v* = v + dt a kept in scratch_v for the next residual (constant density,
+dfsph_predict). Dispatched indirectly: no work groups once the solve has stopped
 (dfsph_check); invocation 0 counts the update.
 
 Mirror of shaders/sph/dfsph_velocity.comp: same names, same statement order, same step labels.
@@ -30,7 +31,7 @@ def dfsph_velocity(spec, real=np.float32):
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
                             time_state, particle_alpha, particle_residual, dfsph_control, particle_kappa,
-                            dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
+                            dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients, particle_vstar):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
         #     invocation 0 counts the update
@@ -79,10 +80,17 @@ def dfsph_velocity(spec, real=np.float32):
             particle_v[i, 2] = particle_v[i, 2] + change_z
             particle_v[i, 3] = real(0.0)
         else:
-            particle_a[i, 0] = particle_a[i, 0] + change_x
-            particle_a[i, 1] = particle_a[i, 1] + change_y
-            particle_a[i, 2] = particle_a[i, 2] + change_z
+            a_x = particle_a[i, 0] + change_x
+            a_y = particle_a[i, 1] + change_y
+            a_z = particle_a[i, 2] + change_z
+            particle_a[i, 0] = a_x
+            particle_a[i, 1] = a_y
+            particle_a[i, 2] = a_z
             particle_a[i, 3] = real(0.0)
+            particle_vstar[i, 0] = particle_v[i, 0] + dt * a_x
+            particle_vstar[i, 1] = particle_v[i, 1] + dt * a_y
+            particle_vstar[i, 2] = particle_v[i, 2] + dt * a_z
+            particle_vstar[i, 3] = real(0.0)
             rhoi = particle_rho[i]
             p = si * rhoi * rhoi / real(P.rest_density)
             if not warm:
