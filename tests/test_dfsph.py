@@ -450,3 +450,24 @@ def test_state_holds_the_settings():
     # the first step's warm start: kappa = p / rho_0 = |g| times the depth below the column's top (0.1 m);
     # none outside the column
     assert state["particle_kappa"] == pytest.approx([9.81 * 0.005, 9.81 * 0.095, 0.0, 9.81 * 0.055], rel=1e-5)
+
+
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_the_shipped_dfsph_tank_comes_to_rest(backend):
+    """scenes/tank_2d_dfsph.toml (Wendland C2 on 2 dx, fluid.relaxation 0.8): after 1 s the water is at
+    rest (median speed under 1 mm/s, none above 5 mm/s) and its pressure grows as rho_0 g depth within 8 %."""
+    if backend == "vulkan":
+        vulkan_or_skip()
+    scene = Scene.load("tank_2d_dfsph")
+    assert scene["fluid.relaxation"] == 0.8 and scene.dfsph
+    with Simulation(scene, backend) as sim:
+        while sim.time < 1.0:
+            sim.advance(50)
+        state = sim.read()
+        assert (log_of(sim)[:, 7] == 1).all()
+    speed = np.linalg.norm(state["particle_v"], axis=1)
+    assert np.median(speed) < 1e-3 and speed.max() < 5e-3, (np.median(speed), speed.max())
+    depth = state["particle_x"][:, 1].max() + scene["fluid.spacing"] / 2 - state["particle_x"][:, 1]
+    bulk = depth > 2 * scene.h
+    slope = np.polyfit(depth[bulk], state["particle_p"][bulk], 1)[0] / (scene["fluid.rest_density"] * 9.81)
+    assert slope == pytest.approx(1.0, abs=0.08)
