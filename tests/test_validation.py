@@ -1,7 +1,9 @@
 """The dam break against Martin & Moyce (1952): measurement definitions, the front's error at a
 coarse resolution, the residual column's physics, and `sphcore validate dam-break`."""
 import csv
+import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -105,3 +107,39 @@ def test_neighbour_counts_match_all_pairs():
     expected = (d2 < h * h * (1 - 1e-5)).sum(axis=1) - 1
     assert expected.max() > 5
     assert np.array_equal(neighbour_counts(x, candidates, h), expected)
+
+
+@pytest.mark.parametrize("case, argv, stem", [
+    ("dam-break", ["--resolution", "8"], "dam_break_2d"),
+    ("dam-break-pressure", ["--resolution", "8", "--t-end-star", "3"], "dam_break_pressure"),
+    ("tank", ["--resolution", "8", "--t-end", "0.3"], "tank"),
+    ("spheric", ["--spacing", "0.08", "--t-end", "0.3"], "spheric_test2"),
+])
+def test_a_validation_run_stopped_by_a_signal_keeps_its_samples(tmp_path, capsys, monkeypatch, case, argv, stem):
+    """SIGTERM during the steps (here sent from the third call of Simulation.advance): the run stops at
+    the next sample, writes the samples it has with the summary naming the signal, and exits 128 + 15; a
+    second signal during the steps would stop them at once."""
+    import signal
+
+    from sphcore.cli import main
+    from sphcore.simulation import Simulation
+
+    calls = []
+    advance = Simulation.advance
+
+    def advance_and_signal(self, steps):
+        calls.append(steps)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGTERM)
+        advance(self, steps)
+
+    monkeypatch.setattr(Simulation, "advance", advance_and_signal)
+    out = tmp_path / "out"
+    assert main(["validate", case, "--out", str(out), *argv]) == 128 + signal.SIGTERM
+    err = capsys.readouterr().err
+    assert "interrupted by SIGTERM at t = " in err and f"are in {out}" in err, err
+    assert len(calls) == 3  # no step after the signal
+    with open(out / f"{stem}.csv") as f:
+        assert len(list(csv.DictReader(f))) == 4  # the samples before each of the three calls, and after
+    summary = json.loads((out / f"{stem}.json").read_text())
+    assert summary["signal"] == signal.SIGTERM and "SIGTERM" in summary["error"]

@@ -51,6 +51,7 @@ import numpy as np
 
 from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError, stable_dt
+from sphcore.signals import Interrupted, Signals
 from sphcore.validate import DATA_DIR, configs
 from sphcore.validate.sensors import wall_pressure
 
@@ -180,8 +181,9 @@ def dt_estimate(scene):
 def sample_run(scene, backend, t_end, sample_dt, sample, progress=True, desc="", device=None):
     """Step `scene` to t_end, calling sample(state, t) -> dict at t = 0 and about every sample_dt
     of simulated time (Simulation.time, the sum of the steps); return (rows, info): info has the
-    particles, steps, stepping seconds (wall_s), the device and the error that stopped the run
-    (None if it ran to the end)."""
+    particles, steps, stepping seconds (wall_s), the device, the error that stopped the run (None if it
+    ran to the end) and the signal that did (SIGINT or SIGTERM: the run stops at the next sample, or at
+    once on a second signal; None), so that the caller writes what was sampled, then raises `stop(info)`."""
     from tqdm import tqdm
 
     from sphcore.simulation import Simulation, SimulationError
@@ -189,26 +191,48 @@ def sample_run(scene, backend, t_end, sample_dt, sample, progress=True, desc="",
     every = max(1, round(sample_dt / dt_estimate(scene)))
     options = {"device": device} if backend == "vulkan" and device is not None else {}
     sim = Simulation(scene, backend, **options)
-    rows, wall, error = [], 0.0, None
+    rows, wall, error, signum = [], 0.0, None, None
     try:
-        with tqdm(total=round(t_end, 6), unit="s", disable=not progress, desc=desc,
-                  bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s [{elapsed}<{remaining}]") as bar:
+        with Signals() as signals, tqdm(total=round(t_end, 6), unit="s", disable=not progress, desc=desc,
+                                        bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s [{elapsed}<{remaining}]") as bar:
             while True:
                 t = sim.time
                 rows.append(sample(sim.read(), t))
                 if t >= t_end * (1 - 1e-9):
                     break
                 start = time.perf_counter()
-                sim.advance(every)
+                advance(sim, signals, every)
                 wall += time.perf_counter() - start
                 bar.update(min(sim.time, t_end) - bar.n)
     except SimulationError as e:
         error = str(e)
+    except Interrupted as e:
+        error, signum = str(e), e.signum
     finally:
         device_name = sim.device_name
         sim.close()
     return rows, {"particles": sim.n, "steps": sim.step_count, "wall_s": wall, "device": device_name,
-                  "error": error}
+                  "error": error, "signal": signum}
+
+
+def advance(sim, signals, steps):
+    """sim.advance(steps) at a safe point of a validation run's loop: a signal received since the last
+    one stops the run here (Interrupted, naming the time), one during the steps stops them at once."""
+    signals.poll(f"at t = {sim.time:.6g} s; the samples taken are written")
+    signals.stepping = True
+    try:
+        sim.advance(steps)
+    finally:
+        signals.stepping = False
+
+
+def stop(info, kept=""):
+    """The exception that ends a validation run that stopped early, once it wrote its samples:
+    Interrupted where a signal stopped it (the shell's status is then 128 + the signal), else
+    SimulationError."""
+    from sphcore.simulation import SimulationError
+    message = info["error"] + kept
+    return Interrupted(info["signal"], message) if info.get("signal") else SimulationError(message)
 
 
 # ---- metrics ----
@@ -266,10 +290,8 @@ def errors(t_star, p_star):
 
 def run_buchner(settings=None, out_dir=None, progress=True):
     """Run the case; return (rows, summary). rows: t, t_star, p_star per sample. Writes
-    dam_break_pressure.csv and .json to out_dir if given; a run that blows up writes what it has
-    (the summary names the error) and raises SimulationError."""
-    from sphcore.simulation import SimulationError
-
+    dam_break_pressure.csv and .json to out_dir if given; a run that blows up or is interrupted writes what
+    it has (the summary names the error) and raises SimulationError or Interrupted (`stop`)."""
     s = {**SETTINGS, **(settings or {})}
     scene = buchner_scene(s)
     H = s["H"]
@@ -301,7 +323,7 @@ def run_buchner(settings=None, out_dir=None, progress=True):
             except ImportError:  # no matplotlib (the GPU machine): the CSV and JSON are there
                 pass
             kept = f"; the samples to t* = {rows[-1]['t_star']:.4g} are in {out_dir}"
-        raise SimulationError(info["error"] + kept)
+        raise stop(info, kept)
     return rows, summary
 
 

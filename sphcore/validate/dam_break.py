@@ -152,10 +152,14 @@ def measure(scene, x, k=None):
 
 def run_dam_break(settings=None, out_dir=None, progress=True):
     """Run the case; return (rows, summary). rows: one dict per sample (t, front_x,
-    column_height, T, Z, tau, H). Writes dam_break_<dim>d.csv and summary JSON to out_dir if given."""
+    column_height, T, Z, tau, H). Writes dam_break_<dim>d.csv and summary JSON to out_dir if given; a run
+    that blows up or is interrupted (SIGINT, SIGTERM) writes the samples it has (the summary names the
+    error), then raises SimulationError or Interrupted (buchner.stop)."""
     from tqdm import tqdm
 
-    from sphcore.simulation import Simulation
+    from sphcore.signals import Interrupted, Signals
+    from sphcore.simulation import Simulation, SimulationError
+    from sphcore.validate.buchner import advance, stop
 
     s = {**SETTINGS, **(settings or {})}
     scene = dam_break_scene(s)
@@ -167,9 +171,10 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
     adaptive = scene.adaptive_dt  # the device chooses each step (also DFSPH's): run to t_end in simulated time
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     sim = Simulation(scene, s["backend"], **options)
-    rows, wall, k_min = [], 0.0, min_neighbours(scene)
+    rows, wall, k_min, error, signum = [], 0.0, min_neighbours(scene), None, None
     try:
-        with tqdm(total=steps, unit="step", disable=not progress, desc=f"dam break {s['dimension']}D [{s['backend']}]") as bar:
+        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress,
+                                        desc=f"dam break {s['dimension']}D [{s['backend']}]") as bar:
             while True:
                 front, height = measure(scene, sim.read()["particle_x"], k_min)
                 t = sim.time
@@ -179,13 +184,17 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
                     break
                 k = min(every, steps - sim.step_count) if not adaptive else every
                 start = time.perf_counter()
-                sim.advance(k)  # both backends return when the steps are done
+                advance(sim, signals, k)  # both backends return when the steps are done
                 wall += time.perf_counter() - start
                 bar.update(k)
+    except SimulationError as e:
+        error = str(e)
+    except Interrupted as e:
+        error, signum = str(e), e.signum
     finally:
         sim.close()
     summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": sim.step_count, "wall_s": wall,
-               "min_neighbours": k_min, **errors(rows, s)}
+               "min_neighbours": k_min, "error": error, "signal": signum, **errors(rows, s)}
     t_run = rows[-1]["t"]
     summary.update(mean_dt=t_run / max(sim.step_count, 1), wall_per_simulated_s=wall / t_run if t_run > 0 else None)
     if scene.dfsph:  # issue 14: iterations per step and the errors reached (sphcore.pressure_solver's log)
@@ -201,6 +210,8 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
         out.mkdir(parents=True, exist_ok=True)
         write_csv(out / f"dam_break_{s['dimension']}d.csv", rows)
         atomic_write_bytes(out / f"dam_break_{s['dimension']}d.json", json.dumps(summary, indent=1).encode())
+    if error:
+        raise stop(summary, f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else "")
     return rows, summary
 
 

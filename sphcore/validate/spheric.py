@@ -167,11 +167,14 @@ def errors(rows):
 
 def run_spheric(settings=None, out_dir=None, progress=True):
     """Run the case; return (rows, summary). rows: one dict per sample (t, H1..H4, P1..P8).
-    Writes spheric_test2.csv and spheric_test2.json to out_dir if given; a run that blows up
-    writes the samples it has (the summary names the error) and raises SimulationError."""
+    Writes spheric_test2.csv and spheric_test2.json to out_dir if given; a run that blows up or is
+    interrupted (SIGINT, SIGTERM) writes the samples it has (the summary names the error), then raises
+    SimulationError or Interrupted (buchner.stop)."""
     from tqdm import tqdm
 
+    from sphcore.signals import Interrupted, Signals
     from sphcore.simulation import Simulation, SimulationError
+    from sphcore.validate.buchner import advance, stop
 
     s = {**SETTINGS, **(settings or {})}
     scene = spheric_scene(s)
@@ -184,9 +187,10 @@ def run_spheric(settings=None, out_dir=None, progress=True):
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     start = time.perf_counter()
     sim = Simulation(scene, s["backend"], **options)
-    rows, wall, error = [], 0.0, None
+    rows, wall, error, signum = [], 0.0, None, None
     try:
-        with tqdm(total=steps, unit="step", disable=not progress, desc=f"SPHERIC test 2 [{s['backend']}]") as bar:
+        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress,
+                                        desc=f"SPHERIC test 2 [{s['backend']}]") as bar:
             while True:
                 state = sim.read()
                 x, p = state["particle_x"].astype(np.float64), state["particle_p"].astype(np.float64)
@@ -195,23 +199,24 @@ def run_spheric(settings=None, out_dir=None, progress=True):
                     break
                 k = min(every, steps - sim.step_count) if not adaptive else every
                 tick = time.perf_counter()
-                sim.advance(k)
+                advance(sim, signals, k)
                 wall += time.perf_counter() - tick
                 bar.update(k)
     except SimulationError as e:
         error = str(e)
+    except Interrupted as e:
+        error, signum = str(e), e.signum
     finally:
         device = sim.device_name
         sim.close()
     summary = {"settings": s, "configuration": configs.overrides(s), "particles": sim.n, "dt": dt,
                "steps": sim.step_count, "h": h, "viscosity": scene["fluid.viscosity"],
-               "wall_s": wall, "total_s": time.perf_counter() - start, "device": device, "error": error,
+               "wall_s": wall, "total_s": time.perf_counter() - start, "device": device, "error": error, "signal": signum,
                "gauges_x": GAUGES, "sensors": SENSORS, **errors(rows)}
     if out_dir is not None:
         write_results(rows, summary, out_dir)
     if error:
-        kept = f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else ""
-        raise SimulationError(error + kept)
+        raise stop(summary, f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else "")
     return rows, summary
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from sphcore.scene import Scene, SceneError
 from sphcore.validate import configs
-from sphcore.validate.buchner import RHO0, dt_estimate, sample_run, write_results
+from sphcore.validate.buchner import RHO0, dt_estimate, sample_run, stop, write_results
 from sphcore.validate.sensors import wall_pressures
 
 G = 9.81
@@ -98,9 +98,8 @@ def profile(x, p, h, surface, floor_pressure=None):
 def run_tank(settings=None, out_dir=None, progress=True):
     """Run the case; return (rows, summary). rows: the time series (t, sensors, slope and
     deviation of each snapshot); summary: the last snapshot's figures against the targets, and
-    its profile in layers. Writes tank.csv, tank.json to out_dir if given."""
-    from sphcore.simulation import SimulationError
-
+    its profile in layers. Writes tank.csv, tank.json to out_dir if given; a run that blows up or is
+    interrupted writes what it has, then raises (buchner.stop)."""
     s = {**SETTINGS, **(settings or {})}
     scene = tank_scene(s)
     n = len(scene.initial_positions())
@@ -135,7 +134,7 @@ def run_tank(settings=None, out_dir=None, progress=True):
     if out_dir is not None:
         write_results(rows, summary, out_dir, "tank")
     if info["error"]:
-        raise SimulationError(info["error"])
+        raise stop(info, f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else "")
     return rows, summary
 
 
