@@ -218,7 +218,7 @@ def sample_run(scene, backend, t_end, sample_dt, sample, progress=True, desc="",
 def advance(sim, signals, steps):
     """sim.advance(steps) at a safe point of a validation run's loop: a signal received since the last
     one stops the run here (Interrupted, naming the time), one during the steps stops them at once."""
-    signals.poll(f"at t = {sim.time:.6g} s; the samples taken are written")
+    signals.poll(f"at t = {sim.time:.6g} s")
     signals.stepping = True
     try:
         sim.advance(steps)
