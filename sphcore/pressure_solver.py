@@ -74,11 +74,12 @@ class SolverLog:
         count = backend.read_buffer("dfsph_neighbour_count")
         k = int(np.argmax(count))
         particle = int(backend.read_buffer("particle_id")[k])
+        diverged = self.diverged()
         raise SimulationError(
             f"step {step}: a particle had more neighbours and wall images within h than its neighbour list's "
             f"{self.scene.max_neighbours} slots (fluid.max_neighbours); at step {last} particle {particle} has "
             f"{int(count[k])}. The solves would lose pairs, so the run stops here: "
-            + (f"likely cause: {self.diverged()}" if self.diverged() else
+            + (f"likely cause: {diverged}" if diverged else
                "raise fluid.max_neighbours, or look for particles crowding together (a blow-up)"))
 
     def warn(self, control, state, failures, last):

@@ -81,13 +81,13 @@ def mc_parameters(shape, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), isolev
     return params
 
 
+RUN_FROM = 1 << 21  # cubes from which emit_cubes takes runs of 4 (default_cube_run)
+
+
 def default_cube_run(shape):
     """emit_cubes' cubes per invocation for a volume of `shape`, as measured on the H200
     (benchmarks/marching_cubes.py --cube-runs): runs of 4 from RUN_FROM cubes, single cubes below."""
     return 4 if int(np.prod([k - 1 for k in shape])) >= RUN_FROM else 1
-
-
-RUN_FROM = 1 << 21
 
 
 def stage_params(params, level):
