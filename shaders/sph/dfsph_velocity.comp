@@ -68,7 +68,10 @@ void main() {
         real3 g = listed_gradient(i, slot, xi, wall, inward, j, image);
         // [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];
-        if (warm) sj = particle_residual[j] > real(0.0) ? particle_kappa[j] : real(0.0);
+        if (warm) {
+            real kappa_j = particle_kappa[j];  // (read before the test: a select, not a branch that mispredicts)
+            sj = particle_residual[j] > real(0.0) ? kappa_j : real(0.0);
+        }
         real t = si + sj;
         change -= t * g;
     }

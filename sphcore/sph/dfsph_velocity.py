@@ -67,7 +67,8 @@ def dfsph_velocity(spec, real=np.float32):
             # [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
             sj = scale * particle_alpha[j] * particle_residual[j]
             if warm:
-                sj = particle_kappa[j] if particle_residual[j] > real(0.0) else real(0.0)
+                kappa_j = particle_kappa[j]  # (read before the test: a select, not a branch that mispredicts)
+                sj = kappa_j if particle_residual[j] > real(0.0) else real(0.0)
             t = si + sj
             change_x -= t * g_x
             change_y -= t * g_y
