@@ -8,6 +8,9 @@ solver's mean dt from a full run (--dt-from: the JSONs of benchmarks/dfsph_gpu.s
 mm3d_<resolution>_<solver>.json) the wall time per simulated second. Printed and written as JSON.
 With --profile, each solver then runs --steps more steps with a GPU timestamp after every dispatch
 (sphcore.profile): its per-stage table is printed and saved in its row (the timed steps stay unprofiled).
+The timed steps are early ones (after --warm), before the impact; --whole-run also times each full run's
+steps again from the start (the impact's iterations included). --cfl-number runs DFSPH at several CFL
+numbers (the file of CFL c under --dt-from: mm3d_<resolution>_dfsph_cfl<c>.json, dfsph_gpu.sh's CFLS).
 
     python3 benchmarks/dfsph_steps.py --backend vulkan --resolution 40 80 --dt-from benchmarks/results/dfsph/h200 \\
         --out benchmarks/results/dfsph/h200/steps.json
@@ -37,13 +40,19 @@ def main():
     ap.add_argument("--profile", action="store_true", help="also a per-stage profile of each solver")
     ap.add_argument("--max-iterations", type=int, help="DFSPH's fluid.max_iterations (default: the scene's, 100): "
                     "each recorded iteration that finds its solve stopped is still three empty dispatches")
+    ap.add_argument("--cfl-number", type=float, nargs="+", help="DFSPH's time.cfl_number, one run each (default: "
+                    "the scene's, 0.4); --dt-from's file for CFL c is mm3d_<resolution>_dfsph_cfl<c>.json")
+    ap.add_argument("--whole-run", action="store_true", help="with --dt-from: also each full run's steps again from "
+                    "the start, timed without reading the state back (the impact's iterations included)")
     ap.add_argument("--out")
     args = ap.parse_args()
     rows = []
+    runs = [("state_equation", None)] + [("dfsph", cfl) for cfl in args.cfl_number or [None]]
     for r in args.resolution:
-        for solver, config in SOLVERS.items():
-            scene = dam_break_scene({"dimension": 3, "resolution": r, "depth": r, "config": config,
-                                     "kernel": args.kernel, "backend": args.backend})
+        for solver, cfl in runs:
+            label = solver if cfl is None else f"dfsph_cfl{cfl:g}"  # (and the --dt-from file's name)
+            scene = dam_break_scene({"dimension": 3, "resolution": r, "depth": r, "config": SOLVERS[solver],
+                                     "kernel": args.kernel, "backend": args.backend, "cfl_number": cfl})
             if args.max_iterations and solver == "dfsph":
                 data = json.loads(scene.to_json())
                 data["fluid"]["max_iterations"] = args.max_iterations
@@ -60,7 +69,8 @@ def main():
                 seconds = (time.perf_counter() - start) / (args.steps // args.per_submit * args.per_submit)
                 timed = args.steps // args.per_submit * args.per_submit
                 log = sim.solver_log.array()[-timed:] if solver == "dfsph" else None
-                row = {"resolution": r, "particles": sim.n, "solver": solver, "ms_per_step": 1e3 * seconds,
+                row = {"resolution": r, "particles": sim.n, "solver": solver, "label": label,
+                       "cfl_number": scene["time.cfl_number"] if solver == "dfsph" else None, "ms_per_step": 1e3 * seconds,
                        "max_iterations": scene["fluid.max_iterations"] if solver == "dfsph" else None,
                        "unconverged_steps": int((log[:, 7] == 0).sum()) if log is not None else None,
                        # the timed steps' mean iterations per solve, and (Vulkan) the windows' resumptions
@@ -75,18 +85,45 @@ def main():
                     row["profile"] = profile.rows()
                     print(profile.table(), flush=True)
             if args.dt_from:
-                full = json.loads((Path(args.dt_from) / f"mm3d_{r}_{solver}.json").read_text())
+                full = json.loads((Path(args.dt_from) / f"mm3d_{r}_{label}.json").read_text())
                 row.update(mean_dt=full["mean_dt"], wall_per_simulated_s=seconds / full["mean_dt"],
                            rms_Z_table2=full["rms_Z_table2"])
+                if args.whole_run:
+                    row["whole_run"] = whole_run(scene, args.backend, full["steps"], args.per_submit)
             rows.append(row)
             print(json.dumps(row), flush=True)
     for r in args.resolution:
-        mine = {row["solver"]: row for row in rows if row["resolution"] == r}
-        if args.dt_from:
-            print(f"{r} across a: DFSPH / WCSPH wall time per simulated second = "
-                  f"{mine['dfsph']['wall_per_simulated_s'] / mine['state_equation']['wall_per_simulated_s']:.2f}")
+        mine = [row for row in rows if row["resolution"] == r]
+        for row in mine[1:] if args.dt_from else ():
+            print(f"{r} across a, {row['label']}: DFSPH / WCSPH wall time per simulated second = "
+                  f"{row['wall_per_simulated_s'] / mine[0]['wall_per_simulated_s']:.2f}" + (
+                      f"; over the whole run {row['whole_run']['wall_per_simulated_s']:.2f} / "
+                      f"{mine[0]['whole_run']['wall_per_simulated_s']:.2f} s = "
+                      f"{row['whole_run']['wall_per_simulated_s'] / mine[0]['whole_run']['wall_per_simulated_s']:.2f}"
+                      if args.whole_run else ""))
     if args.out:
         Path(args.out).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
+
+
+def whole_run(scene, backend, steps, per_submit):
+    """The `steps` steps of a full run (dfsph_gpu.sh's, to t = 0.5 s) again from the start, --per-submit steps a
+    submit and the state left on the device: the wall time per simulated second, the first submit (whose
+    command buffers Python records) untimed."""
+    with Simulation(scene, backend) as sim:
+        sim.advance(per_submit)
+        first = sim.time
+        start = time.perf_counter()
+        while sim.step_count < steps:
+            sim.advance(min(per_submit, steps - sim.step_count))
+        sim.backend.read_buffer("time_state")  # (waits for the device)
+        wall = time.perf_counter() - start
+        simulated = sim.time - first
+        out = {"steps": steps, "simulated_s": simulated, "wall_s": wall, "wall_per_simulated_s": wall / simulated}
+        if scene.dfsph:
+            log = sim.solver_log.array()
+            out.update(divergence_iterations=float(log[:, 3].mean()), density_iterations=float(log[:, 5].mean()),
+                       unconverged_steps=int((log[:, 7] == 0).sum()))
+        return out
 
 
 if __name__ == "__main__":

@@ -101,12 +101,20 @@ def test_configurations_name_scene_keys():
     assert configs.overrides({"config": "artificial", "alpha": 0.05})[configs.ALPHA_KEY] == 0.05
     assert configs.overrides({"config": "graphics", "kernel": "wendland_c2"}) == {"physics.kernel": "wendland_c2"}
     assert configs.overrides({"adaptive_dt": True}) == {"time.dt": "adaptive"}
+    assert configs.overrides({"config": "dfsph", "cfl_number": 0.8}) == {"physics.pressure_solver": "dfsph",
+                                                                          "time.cfl_number": 0.8}
     with pytest.raises(SceneError, match="--config nope: no such configuration"):
         configs.overrides({"config": "nope"})
     with pytest.raises(SceneError, match="physics.no_such_switch"):
         configs.require({"physics.no_such_switch": 1})
     assert configs.apply({"physics": {"dimension": 2}}, {"physics.equation_of_state": "tait"}) == {
         "physics": {"dimension": 2, "equation_of_state": "tait"}}
+
+
+def test_a_cfl_number_out_of_range_is_refused_naming_the_key(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["validate", "dam-break", "--out", str(out), "--pressure-solver", "dfsph", "--cfl-number", "1.5"]) == 1
+    assert "time.cfl_number = 1.5: must be within [0.01, 1]" in capsys.readouterr().err and not out.exists()
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -117,6 +125,7 @@ def test_configurations_name_scene_keys():
     (["--kernel", "cubic"], "--kernel"),
     (["--density-diffusion", "antuono"], "--density-diffusion"),
     (["--delta", "0"], "--delta"),
+    (["--cfl-number", "0"], "--cfl-number"),
     (["--backend", "cuda"], "--backend"),
 ])
 def test_bad_options_are_rejected_naming_them(tmp_path, capsys, argv, message):

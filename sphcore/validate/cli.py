@@ -155,6 +155,8 @@ def add_physics_options(p):
                    "(dfsph: incompressible, dt from time.cfl_number on the particle speed)")
     p.add_argument("--relaxation", type=positive(float), help="fluid.relaxation: DFSPH's share omega of each Jacobi "
                    "update (0 < omega <= 1)")
+    p.add_argument("--cfl-number", type=positive(float), help="time.cfl_number: DFSPH's step, dt = cfl_number dx / "
+                   "the fastest particle's speed (default 0.4, at most 1)")
 
 
 def add_commands(sub):

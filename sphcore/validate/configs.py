@@ -33,6 +33,7 @@ SWITCHES = {
     "integrator": ("time.integrator", ("symplectic_euler", "verlet")),
     "pressure_solver": ("physics.pressure_solver", ("state_equation", "dfsph")),  # issue 14
     "relaxation": ("fluid.relaxation", None),  # DFSPH's omega
+    "cfl_number": ("time.cfl_number", None),  # DFSPH's step: the CFL number on the particle speed
 }
 OPTIONS = (*SWITCHES, "adaptive_dt")  # the settings a case takes beside "config"
 ALPHA_KEY = "fluid.alpha"  # Monaghan's alpha of the artificial viscosity model
