@@ -70,7 +70,8 @@ def main():
                 timed = args.steps // args.per_submit * args.per_submit
                 log = sim.solver_log.array()[-timed:] if solver == "dfsph" else None
                 row = {"resolution": r, "particles": sim.n, "solver": solver, "label": label,
-                       "cfl_number": scene["time.cfl_number"] if solver == "dfsph" else None, "ms_per_step": 1e3 * seconds,
+                       "cfl_number": scene["time.cfl_number"] if solver == "dfsph" else None,
+                       "ms_per_step": 1e3 * seconds,
                        "max_iterations": scene["fluid.max_iterations"] if solver == "dfsph" else None,
                        "unconverged_steps": int((log[:, 7] == 0).sum()) if log is not None else None,
                        # the timed steps' mean iterations per solve, and (Vulkan) the windows' resumptions
