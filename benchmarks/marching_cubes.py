@@ -156,6 +156,7 @@ def main(argv=None):
     parser.add_argument("--out", help="JSON file for the results")
     args = parser.parse_args(argv)
     contenders = [c for c in args.contenders.split(",") if c]
+    cube_runs = [int(k) for k in args.cube_runs.split(",") if k]
     unknown = set(contenders) - set(TIMERS)
     if unknown:
         parser.error(f"unknown contenders {sorted(unknown)}: choose from {', '.join(TIMERS)}")
@@ -169,8 +170,7 @@ def main(argv=None):
         if shape in SEED2_MS:
             row["seed2_gtx560_ms"] = dict(zip(("per_cube", "histopyramid"), SEED2_MS[shape]))
         for name in contenders:
-            runs = [int(k) for k in args.cube_runs.split(",") if k]
-            row[name] = TIMERS[name](volume, args.repeat, runs) if name == "vulkan" else TIMERS[name](volume, args.repeat)
+            row[name] = TIMERS[name](volume, args.repeat, cube_runs) if name == "vulkan" else TIMERS[name](volume, args.repeat)
             print(f"{'x'.join(map(str, shape)):>12} {name:8} {json.dumps(row[name])}", flush=True)
         results.append(row)
     report = {"benchmark": "marching cubes, five metaballs at level 1", "repeat": args.repeat,

@@ -18,7 +18,6 @@ from collections import namedtuple
 import numpy as np
 
 from sphcore.params import MAX_OBSTACLES, SHADER_DIR, pyramid_levels
-from sphcore.vk_runner.context import STAGING_KEPT
 from sphcore.sph.apply_order import apply_order
 from sphcore.sph.cell_offsets import cell_offsets
 from sphcore.sph.choose_dt import choose_dt
@@ -39,6 +38,7 @@ from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.scatter_particles import scatter_particles
 from sphcore.sph.sort_cells import sort_cells
+from sphcore.vk_runner.context import STAGING_KEPT
 from sphcore.workgroups import group_count
 
 REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says

@@ -26,6 +26,7 @@ def vulkan_or_skip():
 # Vulkan validation layers on in the tests, unless SPHCORE_TEST_VALIDATION=0 (a GPU machine without them)
 VALIDATION = os.environ.get("SPHCORE_TEST_VALIDATION", "1") != "0"
 
+
 @pytest.fixture
 def open_backend():
     """open_backend(name, params, state, stages, spec) -> backend with validation layers on (Vulkan).

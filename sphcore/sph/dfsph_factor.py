@@ -32,8 +32,8 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,
-                          particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
-                          dfsph_gradients):
+                          particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours,
+                          dfsph_neighbour_count, dfsph_gradients):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
         if i >= P.n:

@@ -226,12 +226,12 @@ def advance(sim, signals, steps):
         signals.stepping = False
 
 
-def stop(info, kept=""):
-    """The exception that ends a validation run that stopped early, once it wrote its samples:
-    Interrupted where a signal stopped it (the shell's status is then 128 + the signal), else
-    SimulationError."""
+def stop(info, out_dir=None, reached=""):
+    """The exception that ends a validation run that stopped early, once it wrote its samples (to `reached`,
+    e.g. "t = 1.2 s", in out_dir where given): Interrupted where a signal stopped it (the shell's status is
+    then 128 + the signal), else SimulationError."""
     from sphcore.simulation import SimulationError
-    message = info["error"] + kept
+    message = info["error"] + (f"; the samples to {reached} are in {out_dir}" if out_dir is not None else "")
     return Interrupted(info["signal"], message) if info.get("signal") else SimulationError(message)
 
 
@@ -316,14 +316,12 @@ def run_buchner(settings=None, out_dir=None, progress=True):
     if out_dir is not None:
         write_results(rows, summary, out_dir)
     if info["error"]:
-        kept = ""
         if out_dir is not None:
             try:
                 plot(rows, summary, Path(out_dir) / "dam_break_pressure.png")
             except ImportError:  # no matplotlib (the GPU machine): the CSV and JSON are there
                 pass
-            kept = f"; the samples to t* = {rows[-1]['t_star']:.4g} are in {out_dir}"
-        raise stop(info, kept)
+        raise stop(info, out_dir, f"t* = {rows[-1]['t_star']:.4g}")
     return rows, summary
 
 

@@ -46,8 +46,8 @@ def cmd_dam_break_pressure(args):
           f"2002: impact peak t* {summary['peak_t_star']:.3f} ({100 * summary['peak_time_error']:+.1f} %), p* "
           f"{summary['peak_p_star']:.3f} ({100 * summary['peak_height_error']:+.0f} %), RMS {summary['rms_p_star']:.3f} "
           f"({summary['rms_points']} points); targets: {met}; against De Courcy et al. 2024's simulation, RMS "
-          + ", ".join(f"{1000 * r['y']:g} mm {r['rms_p_star']:.3f} ({r['rms_p_star_calm']:.3f} to t* 6)"
-                    for r in summary["reference"].values()) + f" -> {png}")
+          + ", ".join(f"{1000 * r['y']:g} mm {r['rms_p_star']:.3f} ({r['rms_p_star_calm']:.3f} to t* "
+                      f"{buchner.CALM_UNTIL:g})" for r in summary["reference"].values()) + f" -> {png}")
 
 
 def cmd_tank(args):

@@ -211,7 +211,7 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
         write_csv(out / f"dam_break_{s['dimension']}d.csv", rows)
         atomic_write_bytes(out / f"dam_break_{s['dimension']}d.json", json.dumps(summary, indent=1).encode())
     if error:
-        raise stop(summary, f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else "")
+        raise stop(summary, out_dir, f"t = {rows[-1]['t']:.4g} s")
     return rows, summary
 
 

@@ -325,7 +325,8 @@ def front_convergence(runs):
             rows.append({"configuration": config, "dim": dim, "resolutions": f"{coarse} -> {fine}",
                          "backends": f"{found[coarse][1]}, {found[fine][1]}",
                          "RMS of Z between them": step,
-                         "finest": finest, "RMS of Z from the finest": float(np.sqrt(np.mean((Z[coarse] - Z[finest]) ** 2))),
+                         "finest": finest,
+                         "RMS of Z from the finest": float(np.sqrt(np.mean((Z[coarse] - Z[finest]) ** 2))),
                          "observed order": math.log2(previous / step) if previous and step > 0 else None,
                          "T up to": float(T[-1])})
             previous = step

@@ -211,12 +211,13 @@ def run_spheric(settings=None, out_dir=None, progress=True):
         sim.close()
     summary = {"settings": s, "configuration": configs.overrides(s), "particles": sim.n, "dt": dt,
                "steps": sim.step_count, "h": h, "viscosity": scene["fluid.viscosity"],
-               "wall_s": wall, "total_s": time.perf_counter() - start, "device": device, "error": error, "signal": signum,
+               "wall_s": wall, "total_s": time.perf_counter() - start, "device": device, "error": error,
+               "signal": signum,
                "gauges_x": GAUGES, "sensors": SENSORS, **errors(rows)}
     if out_dir is not None:
         write_results(rows, summary, out_dir)
     if error:
-        raise stop(summary, f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else "")
+        raise stop(summary, out_dir, f"t = {rows[-1]['t']:.4g} s")
     return rows, summary
 
 

@@ -134,7 +134,7 @@ def run_tank(settings=None, out_dir=None, progress=True):
     if out_dir is not None:
         write_results(rows, summary, out_dir, "tank")
     if info["error"]:
-        raise stop(info, f"; the samples to t = {rows[-1]['t']:.4g} s are in {out_dir}" if out_dir is not None else "")
+        raise stop(info, out_dir, f"t = {rows[-1]['t']:.4g} s")
     return rows, summary
 
 
