@@ -12,6 +12,7 @@ with them and `in_particle_order` undoes the permutation for output.
 buffers and of the arithmetic on them: Vulkan builds the shaders with SPHCORE_FLOAT64
 (shaders/sph/real.glsl), numba builds the mirrors with `real = np.float64`.
 """
+import math
 import time
 from collections import namedtuple
 
@@ -22,7 +23,7 @@ from sphcore.sph.apply_order import apply_order
 from sphcore.sph.cell_offsets import cell_offsets
 from sphcore.sph.choose_dt import choose_dt
 from sphcore.sph.clear_cells import clear_cells
-from sphcore.sph.compute_density import compute_density
+from sphcore.sph.compute_density import can_list_first, compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP, CONTROL_WINDOW, HISTORY_ROWS,
@@ -327,6 +328,38 @@ def stage_params(params, stage):
     return p
 
 
+TRY_EVERY = 20  # numba: every TRY_EVERY-th call of compute_density runs the scan not chosen (Faster)
+
+
+class Faster:
+    """Two launches of one stage that write the same bits (compute_density's scans with and without a branch
+    on the distance, where it writes lists). The chosen one runs and is timed; every TRY_EVERY-th call the other
+    runs instead, and is chosen if it took less time than the least of the chosen's calls since the last try.
+    Which is faster changes as a flow loses its lattice. A launch of no work groups (warm_up), and the first
+    call, compile both."""
+
+    def __init__(self, *launches):
+        self.launches, self.calls, self.chosen, self.least = launches, 0, 0, math.inf
+
+    def __call__(self, n_groups, *args):
+        if n_groups == 0 or self.calls == 0:
+            for launch in self.launches:
+                launch(0, *args)
+        if n_groups == 0:
+            return
+        self.calls += 1
+        k = self.chosen if self.calls % TRY_EVERY else 1 - self.chosen
+        start = time.perf_counter()
+        self.launches[k](n_groups, *args)
+        seconds = time.perf_counter() - start
+        if k == self.chosen:
+            self.least = min(self.least, seconds)
+            return
+        if seconds < self.least:
+            self.chosen = k
+        self.least = math.inf
+
+
 class NumbaBackend:
     """The shaders' numba mirrors on the CPU: work groups in parallel, invocations in order.
     `state` is converted to `precision` (a copy: the caller's arrays are never written)."""
@@ -340,8 +373,14 @@ class NumbaBackend:
             profile.device = "cpu (numba)"
         self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
-        self._launch = [(STAGES[s.name][0](spec, self.real), self._groups(s), stage_params(params, s),
+        self._launch = [(self._launcher(s.name), self._groups(s), stage_params(params, s),
                          [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
+
+    def _launcher(self, name):
+        launch = STAGES[name][0](self.spec, self.real)
+        if name == "compute_density" and can_list_first(self.spec):
+            return Faster(launch, compute_density(self.spec._replace(BRANCH_FREE_SCAN=True), self.real))
+        return launch
 
     def _groups(self, stage):
         """A stage's work groups, or for an indirect one the index in dfsph_control to read them from

@@ -287,6 +287,71 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
 
 
 @pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend):
+    """compute_density's scan without a branch on the distance (BRANCH_FREE_SCAN: every candidate listed, the
+    kernel summed over the list after) writes bitwise the densities, pressures, counts and lists of the scan
+    with the branch, on a column collapsing into the corner (images of both walls), with lists of 26 slots
+    and of 10 and 6: lists that the scan fills (the branch takes over) and lists too short (count > slots)."""
+    from sphcore.backends import empty_state, make_backend, plan
+    if backend == "vulkan":
+        vulkan_or_skip()
+    scene = scene_of(**{"physics.pressure_solver": "state_equation"})
+    with Simulation(scene, "numba") as sim:
+        sim.advance(40)
+        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
+    stages = plan(scene)[:plan(scene).index(Stage("compute_density")) + 1]
+    for slots in (26, 10, 6):
+        out = {}
+        for free in (False, True):
+            spec = scene.spec_for(backend)._replace(MAX_NEIGHBOURS=slots, BRANCH_FREE_SCAN=free)
+            state = empty_state(scene.params(sim.n), max_neighbours=slots)
+            state.update({k: v.copy() for k, v in moving.items()})
+            b = make_backend(backend, scene.params(sim.n), state, stages, spec)
+            try:
+                for stage in stages:
+                    b.run_stage(stage)
+                out[free] = b.read()
+            finally:
+                b.close()
+        count = out[False]["dfsph_neighbour_count"]
+        assert count.min() > 0 and count.max() == 10  # (10 slots: the fullest lists full; 6: too short)
+        for name in ("particle_rho", "particle_p", "dfsph_neighbour_count"):
+            assert np.array_equal(out[True][name], out[False][name]), (slots, name)
+        lists = [list_entries(out[free], spec) for free in (False, True)]
+        for i in np.flatnonzero(count <= slots):
+            assert np.array_equal(lists[1][i, :count[i]], lists[0][i, :count[i]]), (slots, i)
+
+
+@pytest.mark.parametrize("slow_first", [True, False])
+def test_numba_tries_the_other_scan_and_runs_the_faster(slow_first):
+    """The numba backend's compute_density (backends.Faster) runs the chosen scan, and every TRY_EVERY-th call
+    the other, which is chosen if it was faster. A launch of no work groups (warm_up), and the first call, compile
+    both."""
+    import time
+
+    from sphcore.backends import TRY_EVERY, Faster
+    calls = []
+
+    def launch(name, seconds):
+        def run(n_groups, *args):
+            calls.append((name, n_groups))
+            time.sleep(seconds)
+        return run
+
+    slow, quick = launch("slow", 0.01), launch("quick", 0.0)
+    faster = Faster(slow, quick) if slow_first else Faster(quick, slow)
+    faster(0, "params")
+    assert sorted(calls) == [("quick", 0), ("slow", 0)]
+    calls.clear()
+    for _ in range(4 * TRY_EVERY):
+        faster(4, "params")
+    first, other = ("slow", "quick") if slow_first else ("quick", "slow")
+    assert calls[:2] == [(first, 0), (other, 0)]  # (both compiled)
+    names = [name for name, _ in calls[2:]]
+    assert names == [first] * (TRY_EVERY - 1) + [other] + (["quick"] * (TRY_EVERY - 1) + ["slow"]) * 3
+
+
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
 def test_neighbour_list_overflow_stops_the_run_naming_the_step(backend):
     if backend == "vulkan":
         vulkan_or_skip()

@@ -31,7 +31,7 @@ layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
 layout(std430, binding = 17) writeonly buffer ParticleDrho { real particle_drho[]; };
-layout(std430, binding = 29) writeonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 29) buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) writeonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 
 // Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
@@ -41,6 +41,32 @@ uint neighbour_hash(uint id, uint image) {
     h *= 0x85EBCA77u;
     h ^= h >> 13;
     return h;
+}
+
+// A scan with no branch on the distance (BRANCH_FREE_SCAN, where the list is written and the density summed):
+// once the flow has lost its lattice a CPU mispredicts that branch, about one candidate in seven being a neighbour.
+// Every candidate goes into the list's next slot, which only one within h keeps, self included; the kernel is
+// then summed over the list in the scan's order and self taken out of it (listed_sum): the same bits as the scan
+// with the branch. Before a cell range that could fill the list, it is summed, and the scan goes on with the branch.
+const bool LIST_FIRST = BRANCH_FREE_SCAN && MAX_NEIGHBOURS > 0u && !CONTINUITY && !NEIGHBOUR_STATS;
+
+// Adds kernel_w over the `count` entries of i's list (a list-first scan's, self among them) to sum_w in the
+// list's order, and takes self out of the list: returns the others' count.
+uint listed_sum(uint i, real3 xi, real3 wall, uint count, inout real sum_w) {
+    uint self_seen = 0u;
+    for (uint slot = 0u; slot < count; ++slot) {
+        uint pair = dfsph_neighbours[list_slot(i, slot)];
+        uint j = pair & NEIGHBOUR_MASK;
+        uint image = pair >> IMAGE_SHIFT;
+        real3 xk = particle_x[j].xyz;
+        if (image != 0u) xk = reflected(xk, wall, image);
+        real3 r = xi - xk;
+        real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+        sum_w += kernel_w(r2);
+        dfsph_neighbours[list_slot(i, slot - self_seen)] = pair;
+        self_seen |= uint(pair == i);
+    }
+    return count - self_seen;
 }
 
 void main() {
@@ -69,12 +95,14 @@ void main() {
     //     is within h of xi's own image xm, so the cells searched are those around xm.
     //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
     //     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
+    //     (LIST_FIRST: every candidate first, summed from the list after)
     real sum_w = real(0.0);
     real sum_div = real(0.0);
     real sum_diffusion = real(0.0);
     uint found = 0u;
     uint fingerprint = 0u;
     uint count = 0u;
+    bool listing = LIST_FIRST;
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
         bool fx = (image & 1u) != 0u;
@@ -93,12 +121,21 @@ void main() {
                 start = cell_start[first];
                 end = cell_start[last] + cell_pyramid[last];
             }
+            if (listing && count + (end - start) > MAX_NEIGHBOURS) {  // the list may fill: summed now, and the
+                count = listed_sum(i, xi, wall, count, sum_w);          // rest scanned with the branch
+                listing = false;
+            }
             for (uint j = start; j < end; ++j) {
                 real3 xk = particle_x[j].xyz;
                 if (image != 0u) xk = reflected(xk, wall, image);
                 if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
                 real3 r = xi - xk;
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                if (listing) {  // (list first: every candidate into the next slot, kept by one within h)
+                    dfsph_neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
+                    count += uint(r2 < P.h2);
+                    continue;
+                }
                 if (r2 < P.h2) {
                     if (!CONTINUITY) sum_w += kernel_w(r2);
                     if (NEIGHBOUR_STATS) {
@@ -128,6 +165,7 @@ void main() {
             }
         }
     }
+    if (listing) count = listed_sum(i, xi, wall, count, sum_w);
     // [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
     //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;

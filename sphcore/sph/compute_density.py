@@ -15,7 +15,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.density_diffusion import density_diffusion
-from sphcore.sph.dfsph import IMAGE_SHIFT, list_slots
+from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
@@ -34,6 +34,11 @@ def neighbour_hash(id, image):
     return h
 
 
+def can_list_first(spec):
+    """Whether the spec's scan writes lists and sums the density, where BRANCH_FREE_SCAN lists first."""
+    return spec.MAX_NEIGHBOURS > 0 and not spec.CONTINUITY and not spec.NEIGHBOUR_STATS
+
+
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
     DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
@@ -42,11 +47,39 @@ def compute_density(spec, real=np.float32):
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
+    # A scan with no branch on the distance (BRANCH_FREE_SCAN, where the list is written and the density summed):
+    # once the flow has lost its lattice a CPU mispredicts that branch, about one candidate in seven being a
+    # neighbour. Every candidate goes into the list's next slot, which only one within h keeps, self included;
+    # the kernel is then summed over the list in the scan's order and self taken out of it (listed_sum): the
+    # same bits as the scan with the branch. Before a cell range that could fill the list, it is summed, and the
+    # scan goes on with the branch.
+    LIST_FIRST = spec.BRANCH_FREE_SCAN and can_list_first(spec)
     list_slot = list_slots(spec)
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
     hydrostatic_density, diffusion_term = density_diffusion(spec, real)
     equation_of_state_ = equation_of_state(spec, real)
+
+    @njit
+    def listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, count, sum_w):
+        """Adds kernel_w over the `count` entries of i's list (a list-first scan's, self among them) to sum_w
+        in the list's order, and takes self out of the list: returns (the others' count, sum_w)."""
+        self_seen = 0
+        for slot in range(count):
+            pair = int(dfsph_neighbours[list_slot(P, i, slot)])
+            j = pair & NEIGHBOUR_MASK
+            image = pair >> IMAGE_SHIFT
+            xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
+            if image != 0:
+                xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
+            r_x = xi_x - xk
+            r_y = xi_y - yk
+            r_z = xi_z - zk
+            r2 = r_x * r_x + r_y * r_y + r_z * r_z
+            sum_w += kernel_w(P, r2)
+            dfsph_neighbours[list_slot(P, i, slot - self_seen)] = pair
+            self_seen |= int(pair == i)
+        return count - self_seen, sum_w
 
     @njit
     def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
@@ -82,12 +115,14 @@ def compute_density(spec, real=np.float32):
         #     is within h of xi's own image xm, so the cells searched are those around xm.
         #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
         #     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
+        #     (LIST_FIRST: every candidate first, summed from the list after)
         sum_w = real(0.0)
         sum_div = real(0.0)
         sum_diffusion = real(0.0)
         found = 0
         fingerprint = 0
         count = 0
+        listing = LIST_FIRST
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
@@ -106,6 +141,10 @@ def compute_density(spec, real=np.float32):
                         continue
                     start = int(cell_start[first])
                     end = int(cell_start[last]) + int(cell_pyramid[last])
+                if listing and count + (end - start) > MAX_NEIGHBOURS:  # the list may fill: summed now, and the
+                    count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y,
+                                              wall_z, count, sum_w)  # rest scanned with the branch
+                    listing = False
                 for j in range(start, end):
                     xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
                     if image != 0:
@@ -116,6 +155,10 @@ def compute_density(spec, real=np.float32):
                     r_y = xi_y - yk
                     r_z = xi_z - zk
                     r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if listing:  # (list first: every candidate into the next slot, kept by one within h)
+                        dfsph_neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
+                        count += int(r2 < P.h2)
+                        continue
                     if r2 < P.h2:
                         if not CONTINUITY:
                             sum_w += kernel_w(P, r2)
@@ -147,6 +190,9 @@ def compute_density(spec, real=np.float32):
                     if DENSITY_DIFFUSION > 0:
                         sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x,
                                                         particle_x[j, 1] - xi_y, particle_x[j, 2] - xi_z, r2, rlen)
+        if listing:
+            count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
+                                      count, sum_w)
         # [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
         #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w
