@@ -93,7 +93,9 @@ BUFFERS = {
 # sweep ("gradients" is n times spec.MAX_NEIGHBOURS then, else 1).
 # dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
-# particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl).
+# particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl); under
+# DFSPH, which never runs Verlet, the sum of a particle's list entries' V grad_i W (dfsph_factor writes it,
+# dfsph_residual reads it: particle_gradient_sum there).
 # time_state: (dt, the last step's dt, time hi, time lo) written on the device by choose_dt (with
 # time.dt = "adaptive" or "verlet"; zero at the start); the time is hi + lo (a compensated float32 sum).
 # dt_partial: reduce_dt's largest (|v|^2, |a|^2) per work group (as many as particles: local size 1).
@@ -131,13 +133,13 @@ STAGES = {
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
                                                  "dfsph_control", "dfsph_state", "particle_kappa", "dfsph_neighbours",
-                                                 "dfsph_neighbour_count", "dfsph_gradients")),
+                                                 "dfsph_neighbour_count", "dfsph_gradients", "particle_vh")),
     "dfsph_predict": (dfsph_predict, "particles", ("particle_v", "particle_a", "scratch_v", "time_state")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "scratch_v", "particle_rho",
                                                      "obstacle_box", "time_state", "particle_residual",
                                                      "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count",
                                                      "dfsph_gradients", "dfsph_control", "dfsph_state",
-                                                     "dfsph_history")),
+                                                     "dfsph_history", "particle_vh")),
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "obstacle_box", "time_state", "particle_alpha",
                                                      "particle_residual", "dfsph_control", "particle_kappa",

@@ -8,7 +8,7 @@
 // pressure is cleared and its stiffness sum scaled to the warm start (WARM_START). The sums walk the
 // particle's neighbour list, which compute_density's scan wrote; with GRADIENTS they store each entry's
 // V grad W_ij (dfsph_gradients) for the solves' sweeps, which then read it instead of computing the pair
-// again (dfsph.glsl).
+// again (dfsph.glsl). The sum of each particle's V grad W_ij goes to particle_gradient_sum (dfsph_residual).
 // Mirror: sphcore/sph/dfsph_factor.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -32,6 +32,7 @@ layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 layout(std430, binding = 31) writeonly buffer DfsphGradients { real4 dfsph_gradients[]; };
+layout(std430, binding = 19) writeonly buffer ParticleVh { real4 particle_gradient_sum[]; };  // (DFSPH: no Verlet)
 #include "neighbour_list.glsl"
 
 void main() {
@@ -86,6 +87,7 @@ void main() {
     // [6] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
     //     (dfsph_velocity accumulates both)
     particle_alpha[i] = alpha;
+    particle_gradient_sum[i] = real4(sum_grad, 0.0);
     particle_p[i] = real(0.0);
     particle_kappa[i] = real(WARM_START) * particle_kappa[i];
     // [7] a list too long for its MAX_NEIGHBOURS slots marks the step (the same value from every

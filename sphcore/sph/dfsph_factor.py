@@ -1,7 +1,8 @@
 """DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11) times omega = fluid.relaxation, one invocation per
 particle, after compute_density; invocation 0 also starts the step's two solves (dfsph.py: their flags, counts and
 indirect dispatches), and every particle's pressure starts from 0. The sums walk the particle's neighbour
-list, which compute_density's scan wrote and every sweep of the solves walks too (dfsph.py).
+list, which compute_density's scan wrote and every sweep of the solves walks too (dfsph.py). The sum of each
+particle's V grad W_ij goes to particle_gradient_sum (dfsph_residual).
 
 Mirror of shaders/sph/dfsph_factor.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -33,7 +34,7 @@ def dfsph_factor(spec, real=np.float32):
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,
                           particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours,
-                          dfsph_neighbour_count, dfsph_gradients):
+                          dfsph_neighbour_count, dfsph_gradients, particle_gradient_sum):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
         if i >= P.n:
@@ -93,6 +94,10 @@ def dfsph_factor(spec, real=np.float32):
         # [6] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
         #     (dfsph_velocity accumulates both)
         particle_alpha[i] = alpha
+        particle_gradient_sum[i, 0] = sum_grad_x
+        particle_gradient_sum[i, 1] = sum_grad_y
+        particle_gradient_sum[i, 2] = sum_grad_z
+        particle_gradient_sum[i, 3] = real(0.0)
         particle_p[i] = real(0.0)
         particle_kappa[i] = real(WARM_START) * particle_kappa[i]
         # [7] a list too long for its MAX_NEIGHBOURS slots marks the step (the same value from every
@@ -103,11 +108,11 @@ def dfsph_factor(spec, real=np.float32):
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_p, obstacle_box,
                particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
-               dfsph_gradients):
+               dfsph_gradients, particle_gradient_sum):
         for group in prange(n_groups):
             for lid in range(local_size):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, obstacle_box,
                                   particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours,
-                                  dfsph_neighbour_count, dfsph_gradients)
+                                  dfsph_neighbour_count, dfsph_gradients, particle_gradient_sum)
 
     return cached(launch)

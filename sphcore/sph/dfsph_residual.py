@@ -1,6 +1,7 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
 rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, each gradient as dfsph_factor computes it
-(stored in dfsph_gradients with GRADIENTS); divergence-free solve
+(stored in dfsph_gradients with GRADIENTS), summed as v_i . G_i - sum_j V v_j . grad W_ij with dfsph_factor's
+G_i = sum_j V grad W_ij (particle_gradient_sum); divergence-free solve
 r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a (in
 scratch_v: dfsph_predict, dfsph_velocity);
 each work group's residuals summed in order into dfsph_partial; the last work group to finish runs the
@@ -37,7 +38,8 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box, time_state,
-                            particle_residual, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients):
+                            particle_residual, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
+                            particle_gradient_sum):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
         #     invocation of the group reaches the barrier, with a residual of 0 past the last particle
@@ -59,7 +61,10 @@ def dfsph_residual(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
-        d = real(0.0)
+        sum_g_x = particle_gradient_sum[i, 0]
+        sum_g_y = particle_gradient_sum[i, 1]
+        sum_g_z = particle_gradient_sum[i, 2]
+        d = vi_x * sum_g_x + vi_y * sum_g_y + vi_z * sum_g_z
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
         for slot in range(count):
             # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
@@ -74,8 +79,8 @@ def dfsph_residual(spec, real=np.float32):
                 vk_x = -vk_x if (image & 1) != 0 else vk_x
                 vk_y = -vk_y if (image & 2) != 0 else vk_y
                 vk_z = -vk_z if (image & 4) != 0 else vk_z
-            # [7] V (v_i - v_k) . grad_i W_ik
-            d += (vi_x - vk_x) * g_x + (vi_y - vk_y) * g_y + (vi_z - vk_z) * g_z
+            # [7] V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start)
+            d -= vk_x * g_x + vk_y * g_y + vk_z * g_z
         # [8] the residual: compression only
         residual = max(d, real(0.0))
         if density:
@@ -97,7 +102,7 @@ def dfsph_residual(spec, real=np.float32):
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box,
                time_state, particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
-               dfsph_control, dfsph_state, dfsph_history):
+               dfsph_control, dfsph_state, dfsph_history, particle_gradient_sum):
         groups = (int(params[0].n) + local_size - 1) // local_size
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
@@ -105,7 +110,7 @@ def dfsph_residual(spec, real=np.float32):
                 s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
                                                       particle_vstar, particle_rho, obstacle_box, time_state,
                                                       particle_residual, dfsph_neighbours, dfsph_neighbour_count,
-                                                      dfsph_gradients)
+                                                      dfsph_gradients, particle_gradient_sum)
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
         if n_groups == 0:
