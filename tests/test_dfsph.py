@@ -287,39 +287,49 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
 
 
 @pytest.mark.parametrize("backend", ["numba", "vulkan"])
-def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend):
+@pytest.mark.parametrize("variant", [{}, {
+    "physics.dimension": 3, "physics.precision": "float64", "domain.box_min": [0.0, 0.0, 0.0],
+    "domain.box_max": [0.3, 0.2, 0.06], "fluid.blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.06, 0.06, 0.06]}],
+    "domain.obstacles": [{"min": [0.07, 0.0, 0.0], "max": [0.09, 0.03, 0.06]}]}], ids=["2d", "3d_obstacle_float64"])
+def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend, variant):
     """compute_density's scan without a branch on the distance (BRANCH_FREE_SCAN: every candidate listed, the
     kernel summed over the list after) writes bitwise the densities, pressures, counts and lists of the scan
-    with the branch, on a column collapsing into the corner (images of both walls), with lists of 26 slots
-    and of 10 and 6: lists that the scan fills (the branch takes over) and lists too short (count > slots)."""
+    with the branch, on a column collapsing into the corner (images of the walls; in 3D, float64, also of an
+    obstacle's faces), with lists of fluid.max_neighbours slots, of as many as the fullest list holds (the scan
+    fills them: the branch takes over) and of 4 fewer (too short: count > slots)."""
     from sphcore.backends import empty_state, make_backend, plan
-    if backend == "vulkan":
-        vulkan_or_skip()
-    scene = scene_of(**{"physics.pressure_solver": "state_equation"})
-    with Simulation(scene, "numba") as sim:
+    if backend == "vulkan" or variant:
+        vulkan_or_skip()  # (the 3D state is made on lavapipe: no numba compiling of a whole plan)
+    scene = scene_of(**{"physics.pressure_solver": "state_equation", **variant})
+    precision = scene["physics.precision"]
+    with Simulation(scene, "vulkan" if variant else "numba") as sim:
         sim.advance(40)
-        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
+        moving = {k: v.copy() for k, v in sim.backend.read().items() if k != "dfsph_neighbours"}
     stages = plan(scene)[:plan(scene).index(Stage("compute_density")) + 1]
-    for slots in (26, 10, 6):
-        out = {}
-        for free in (False, True):
-            spec = scene.spec_for(backend)._replace(MAX_NEIGHBOURS=slots, BRANCH_FREE_SCAN=free)
-            state = empty_state(scene.params(sim.n), max_neighbours=slots)
-            state.update({k: v.copy() for k, v in moving.items()})
-            b = make_backend(backend, scene.params(sim.n), state, stages, spec)
-            try:
-                for stage in stages:
-                    b.run_stage(stage)
-                out[free] = b.read()
-            finally:
-                b.close()
-        count = out[False]["dfsph_neighbour_count"]
-        assert count.min() > 0 and count.max() == 10  # (10 slots: the fullest lists full; 6: too short)
+
+    def scan(slots, free):
+        spec = scene.spec_for(backend)._replace(MAX_NEIGHBOURS=slots, BRANCH_FREE_SCAN=free)
+        state = empty_state(scene.params(sim.n), precision, scene["domain.obstacles"], max_neighbours=slots)
+        state.update({k: v.copy() for k, v in moving.items()})
+        b = make_backend(backend, scene.params(sim.n), state, stages, spec, precision=precision)
+        try:
+            for stage in stages:
+                b.run_stage(stage)
+            out = b.read()
+        finally:
+            b.close()
+        return out, list_entries(out, spec)
+
+    fullest = int(scan(scene.max_neighbours, False)[0]["dfsph_neighbour_count"].max())
+    for slots in (scene.max_neighbours, fullest, fullest - 4):
+        (a, a_lists), (b, b_lists) = scan(slots, False), scan(slots, True)
+        count = a["dfsph_neighbour_count"]
+        assert count.min() > 0 and (slots >= fullest or (count > slots).any())
         for name in ("particle_rho", "particle_p", "dfsph_neighbour_count"):
-            assert np.array_equal(out[True][name], out[False][name]), (slots, name)
-        lists = [list_entries(out[free], spec) for free in (False, True)]
+            assert np.array_equal(b[name], a[name]), (slots, name)
         for i in np.flatnonzero(count <= slots):
-            assert np.array_equal(lists[1][i, :count[i]], lists[0][i, :count[i]]), (slots, i)
+            assert np.array_equal(b_lists[i, :count[i]], a_lists[i, :count[i]]), (slots, i)
+    assert (a_lists >> IMAGE_SHIFT != 0).any()  # (wall, and in 3D obstacle, images among the pairs)
 
 
 @pytest.mark.parametrize("slow_first", [True, False])
