@@ -64,9 +64,10 @@ def test_included_helpers_have_mirrors_with_the_same_functions():
 
 
 def test_specialization_constants_are_parsed_from_the_shaders():
-    from sphcore.params import SPEC_CONSTANTS, Spec
+    from sphcore.params import MC_SPEC_CONSTANTS, SPEC_CONSTANTS, Spec
     assert list(Spec._fields) == list(SPEC_CONSTANTS)
-    ids = [cid for cid, _ in SPEC_CONSTANTS.values()]
+    # (the surface's shaders take both sets: sphcore/surface.py)
+    ids = [cid for cid, _ in SPEC_CONSTANTS.values()] + [cid for cid, _ in MC_SPEC_CONSTANTS.values()]
     assert len(set(ids)) == len(ids) and 0 not in ids, "constant 0 is the work-group size"
     assert {"DIM", "GRID", "WALLS", "TAIT", "VISCOSITY", "SURFACE_TENSION", "GRAVITY"} <= set(SPEC_CONSTANTS)
 

@@ -35,5 +35,5 @@ layout(constant_id = 21) const bool GRADIENTS = false;    // DFSPH: dfsph_factor
                                                           // else they compute it again (dfsph.glsl)
 layout(constant_id = 22) const bool LIST_BY_PARTICLE = false; // the lists particle-major (Scene.spec_for: numba),
                                                           // else slot-major (dfsph.glsl: list_slot)
-layout(constant_id = 23) const bool BRANCH_FREE_SCAN = false; // compute_density lists first, with no branch on
+layout(constant_id = 24) const bool BRANCH_FREE_SCAN = false; // compute_density lists first, with no branch on
                                                           // the distance (the numba backend times both scans)
