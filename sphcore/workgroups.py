@@ -7,7 +7,9 @@ parallel (prange); the invocations of one group run in order on one thread. The 
 
 Limits of this emulation (as numba's CUDA simulator documents its own): invocations of a
 group run one after another, so a body must not rely on barrier() or shared memory (a shader
-that does is mirrored with one local loop per phase). A body with atomics is launched with
+that does is mirrored with one local loop per phase, the group's shared memory an array of the
+group, and a local that outlives a barrier an array by local id; tests/test_workgroups.py checks
+these rules on a shader whose every barrier changes its result). A body with atomics is launched with
 `parallel=False`: every invocation then runs in index order, which is one of the orders the
 GPU may choose, and the fixed one. There is no FMA contraction, which a GPU compiler may apply.
 
