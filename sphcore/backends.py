@@ -331,6 +331,8 @@ def stage_params(params, stage):
 
 
 TRY_EVERY = 20  # numba: every TRY_EVERY-th call of compute_density runs the scan not chosen (Faster)
+TIMED_FROM = 4096  # and from this many particles (below, a scan takes well under a millisecond: the second
+#                    scan's compiling, about 2 s when the cache is cold, would not pay)
 
 
 class Faster:
@@ -380,7 +382,7 @@ class NumbaBackend:
 
     def _launcher(self, name):
         launch = STAGES[name][0](self.spec, self.real)
-        if name == "compute_density" and can_list_first(self.spec):
+        if name == "compute_density" and can_list_first(self.spec) and self.params[0]["n"] >= TIMED_FROM:
             return Faster(launch, compute_density(self.spec._replace(BRANCH_FREE_SCAN=True), self.real))
         return launch
 

@@ -332,6 +332,29 @@ def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend, variant):
     assert (a_lists >> IMAGE_SHIFT != 0).any()  # (wall, and in 3D obstacle, images among the pairs)
 
 
+def test_numba_runs_either_scan_from_timed_from_particles_with_the_same_bits(monkeypatch):
+    """From backends.TIMED_FROM particles the numba backend's compute_density is a Faster over both scans; 45 steps
+    of the collapsing column with it (both scans run: the tries) give bitwise the state of 45 steps without, the
+    lists up to their counts."""
+    import sphcore.backends
+    from sphcore.backends import Faster
+    scene = scene_of(**{"physics.pressure_solver": "state_equation"})
+    states = {}
+    for timed_from in (1, 10**9):
+        monkeypatch.setattr(sphcore.backends, "TIMED_FROM", timed_from)
+        with Simulation(scene, "numba") as sim:
+            launches = [launch for launch, *_ in sim.backend._launch if isinstance(launch, Faster)]
+            assert len(launches) == (timed_from == 1)
+            sim.advance(45)
+            assert not launches or launches[0].calls == 45
+            states[timed_from] = sim.backend.read()
+    a, b = states[1], states[10**9]
+    for name in set(a) - {"dfsph_neighbours"}:  # (a list's slots past its count: the scan's last candidates)
+        assert np.array_equal(a[name], b[name]), name
+    count, lists = a["dfsph_neighbour_count"], [list_entries(state, sim.spec) for state in (a, b)]
+    assert all(np.array_equal(lists[0][i, :count[i]], lists[1][i, :count[i]]) for i in range(sim.n))
+
+
 @pytest.mark.parametrize("slow_first", [True, False])
 def test_numba_tries_the_other_scan_and_runs_the_faster(slow_first):
     """The numba backend's compute_density (backends.Faster) runs the chosen scan, and every TRY_EVERY-th call
