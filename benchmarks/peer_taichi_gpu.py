@@ -21,7 +21,7 @@ is unzipped there into a folder on PYTHONPATH. The zip is made here (it is not c
 
 and there:
 
-    unzip -q .taichi/taichi_trim.zip -d /tmp/taichi && PYTHONPATH=/tmp/taichi:/tmp/site:. \\
+    python3 -m zipfile -e .taichi/taichi_trim.zip /tmp/taichi && PYTHONPATH=/tmp/taichi:/tmp/site:. \\
         python3 benchmarks/peer_taichi_gpu.py --counts 65536,262144,1000000,8000000 --out $OUT/peer_taichi_gpu.json
 """
 import argparse

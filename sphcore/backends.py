@@ -27,7 +27,8 @@ from sphcore.sph.compute_density import can_list_first, compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP, CONTROL_WINDOW, HISTORY_ROWS,
-                               NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START, dispatch_base)
+                               NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START, dispatch_base,
+                               list_width)
 from sphcore.sph.dfsph_factor import dfsph_factor
 from sphcore.sph.dfsph_predict import dfsph_predict
 from sphcore.sph.dfsph_residual import dfsph_residual
@@ -87,10 +88,11 @@ BUFFERS = {
 # scratch_v, the sort's scratch, holds v* = v + dt a during DFSPH's constant-density solve (dfsph_predict);
 # dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
 # dfsph_neighbours, dfsph_neighbour_count: each particle's neighbour list for the solves' sweeps, written by
-# dfsph_factor (spec.MAX_NEIGHBOURS slots a particle: "neighbours" is n times that, at least 1 word);
+# dfsph_factor (spec.MAX_NEIGHBOURS slots a particle, rounded up to whole chunks of 4, dfsph.list_width:
+# "neighbours" is n times that, at least 1 word);
 # dfsph_gradients: with spec.GRADIENTS (DFSPH on numba), each list entry's V grad_i W, which dfsph_factor
 # writes in the list's layout: a pair's distance, direction and kernel are computed once a step, not in every
-# sweep ("gradients" is n times spec.MAX_NEIGHBOURS then, else 1).
+# sweep ("gradients" is as long as "neighbours" then, else 1).
 # dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl); under
@@ -216,9 +218,9 @@ def buffer_length(length, params, max_neighbours=0, gradients=False):
     if length == "particles":
         return int(params[0]["n"])
     if length == "neighbours":
-        return max(1, int(params[0]["n"]) * max_neighbours)
+        return max(1, int(params[0]["n"]) * list_width(max_neighbours))
     if length == "gradients":
-        return max(1, int(params[0]["n"]) * max_neighbours) if gradients else 1
+        return max(1, int(params[0]["n"]) * list_width(max_neighbours)) if gradients else 1
     if length == "cells":
         return int(params[0]["cell_total"])
     if length == "pyramid":
@@ -256,10 +258,16 @@ def list_entries(state, spec, name="dfsph_neighbours"):
     """Buffer `name` of the neighbour lists (dfsph_neighbours, or dfsph_gradients) of a state run with `spec`,
     as (particles, spec.MAX_NEIGHBOURS[, 4]) in particle order of the buffers: either layout (list_slot)."""
     n, slots = len(state["particle_id"]), spec.MAX_NEIGHBOURS
-    words = np.asarray(state[name])[:n * slots]
     if spec.LIST_BY_PARTICLE:
+        words = np.asarray(state[name])[:n * slots]
         return words.reshape(n, slots, *words.shape[1:])
-    return words.reshape(slots, n, *words.shape[1:]).swapaxes(0, 1)
+    if not spec.LIST_CHUNKS:
+        words = np.asarray(state[name])[:n * slots]
+        return words.reshape(slots, n, *words.shape[1:]).swapaxes(0, 1)
+    chunks = list_width(slots) // 4  # (chunk c of particle i: the 4 slots at words 4 (c n + i))
+    words = np.asarray(state[name])[:n * 4 * chunks]
+    lists = words.reshape(chunks, n, 4, *words.shape[1:]).swapaxes(0, 1)
+    return lists.reshape(n, 4 * chunks, *words.shape[1:])[:, :slots]
 
 
 def check_obstacles(state, spec):
@@ -278,14 +286,14 @@ def check_neighbours(state, spec):
     """A plan with neighbour lists (DFSPH, or Scene.spec_for) writes spec.MAX_NEIGHBOURS list slots a
     particle: the state must have room for them (empty_state's `max_neighbours`), and every (j, image)
     must fit in a word (dfsph.glsl)."""
-    n = len(state["particle_id"])
-    if len(state["dfsph_neighbours"]) < n * spec.MAX_NEIGHBOURS:
-        raise ValueError(f"the plan's neighbour lists need {n} x {spec.MAX_NEIGHBOURS} words but dfsph_neighbours "
+    n, width = len(state["particle_id"]), list_width(spec.MAX_NEIGHBOURS)
+    if len(state["dfsph_neighbours"]) < n * width:
+        raise ValueError(f"the plan's neighbour lists need {n} x {width} words but dfsph_neighbours "
                          f"holds {len(state['dfsph_neighbours'])}: pass the scene's spec.MAX_NEIGHBOURS to empty_state")
-    if spec.GRADIENTS and len(state["dfsph_gradients"]) < n * spec.MAX_NEIGHBOURS:
-        raise ValueError(f"DFSPH's pair gradients need {n} x {spec.MAX_NEIGHBOURS} entries but dfsph_gradients holds "
+    if spec.GRADIENTS and len(state["dfsph_gradients"]) < n * width:
+        raise ValueError(f"DFSPH's pair gradients need {n} x {width} entries but dfsph_gradients holds "
                          f"{len(state['dfsph_gradients'])}: pass the spec's GRADIENTS to empty_state")
-    if spec.MAX_NEIGHBOURS > 0 and (n > NEIGHBOUR_MASK or n * spec.MAX_NEIGHBOURS >= 2 ** 32):
+    if spec.MAX_NEIGHBOURS > 0 and (n > NEIGHBOUR_MASK or n * width >= 2 ** 32):
         raise ValueError(f"{n} particles with {spec.MAX_NEIGHBOURS} neighbour slots each: the neighbour lists "
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 

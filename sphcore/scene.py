@@ -594,16 +594,19 @@ class Scene:
         and 1.12x at 8 M. Lists of more than LIST_WORDS[backend] words in all (a large scene, or a large
         fluid.smoothing_ratio) are left out: the scan needs no memory. Under DFSPH on numba, where they fit
         (GRADIENT_SLOTS), dfsph_factor also stores each list entry's gradient for the sweeps (GRADIENTS). numba's
-        lists are particle-major, Vulkan's slot-major (LIST_BY_PARTICLE; sphcore.backends.list_entries reads
-        either in particle order)."""
+        lists are particle-major, Vulkan's slot-major (LIST_BY_PARTICLE), under the state equation in chunks of 4
+        slots (LIST_CHUNKS: dfsph.glsl; sphcore.backends.list_entries reads each in particle order)."""
         from sphcore.memory import particle_count
+        from sphcore.sph.dfsph import list_width
 
         spec = self.spec
-        if not spec.DFSPH and particle_count(self) * self.max_neighbours <= LIST_WORDS.get(backend, 0):
+        if not spec.DFSPH and particle_count(self) * list_width(self.max_neighbours) <= LIST_WORDS.get(backend, 0):
             spec = spec._replace(MAX_NEIGHBOURS=self.max_neighbours)
-        if spec.DFSPH and particle_count(self) * spec.MAX_NEIGHBOURS <= GRADIENT_SLOTS.get(backend, 0):
+        if spec.DFSPH and particle_count(self) * list_width(spec.MAX_NEIGHBOURS) <= GRADIENT_SLOTS.get(backend, 0):
             spec = spec._replace(GRADIENTS=True)  # (dfsph_factor stores what the sweeps would compute)
-        return spec._replace(LIST_BY_PARTICLE=backend == "numba" and spec.MAX_NEIGHBOURS > 0)
+        listed = spec.MAX_NEIGHBOURS > 0
+        return spec._replace(LIST_BY_PARTICLE=backend == "numba" and listed,
+                             LIST_CHUNKS=backend == "vulkan" and listed and not spec.DFSPH)
 
     def params(self, n):
         """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""

@@ -73,6 +73,15 @@ def test_default_scenes_are_unchanged_and_dfsph_adds_its_solves():
     assert stages[-1] == "integrate"
 
 
+def counted_lists(state, spec):
+    """list_entries up to each particle's count, the rest zeroed: a slot-major list's last chunk is written whole,
+    so its slots past the count hold what the scan last gathered there (unread)."""
+    lists = list_entries(state, spec).copy()
+    count = np.minimum(state["dfsph_neighbour_count"], spec.MAX_NEIGHBOURS)
+    lists[np.arange(lists.shape[1])[None, :] >= count[:, None]] = 0
+    return lists
+
+
 def stepwise(name, scene, **options):
     """A Simulation whose backend runs one step stage by stage (the plan's order)."""
     return Simulation(scene, name, **options)
@@ -97,8 +106,8 @@ def test_solver_stages_agree_and_count_the_same_iterations():
             assert cpu.spec.GRADIENTS and not gpu.spec.GRADIENTS and len(b.pop("dfsph_gradients")) == 1
             a.pop("dfsph_gradients")
             assert cpu.spec.LIST_BY_PARTICLE and not gpu.spec.LIST_BY_PARTICLE
-            a["dfsph_neighbours"] = list_entries(a, cpu.spec).copy()
-            b["dfsph_neighbours"] = list_entries(b, gpu.spec).copy()
+            a["dfsph_neighbours"] = counted_lists(a, cpu.spec)
+            b["dfsph_neighbours"] = counted_lists(b, gpu.spec)
             assert gap <= 8 * np.finfo(np.float32).eps, f"after {stage}: particle_residual differs by {gap:g}"
             assert_stage_agrees(a, b, stage, STAGE_RTOL)
             if stage.name == "dfsph_factor":  # the step starts both solves' indirect dispatches
@@ -256,34 +265,85 @@ def test_forces_walk_the_list_as_the_scan_would(backend):
 def test_state_equation_forces_from_lists_are_the_scans(backend):
     """With the state equation, runs use neighbour lists too (Scene.spec_for): compute_density writes them,
     compute_forces walks them. Its accelerations are bitwise those of the cell scan (MAX_NEIGHBOURS 0), also
-    with lists too short for most particles (8 slots: those are scanned), on both backends."""
+    with lists too short for most particles (8 slots: those are scanned), on both backends, with the lists in
+    words and in chunks of 4 slots (LIST_CHUNKS, Vulkan's; 26 slots: a last chunk of 2)."""
     from sphcore.backends import empty_state, make_backend, plan
     if backend == "vulkan":
         vulkan_or_skip()
     scene = scene_of(**{"physics.pressure_solver": "state_equation", "physics.surface_tension": True})
     assert scene.spec.MAX_NEIGHBOURS == 0 and scene.spec_for("numba").MAX_NEIGHBOURS == scene.max_neighbours == 26
-    assert scene.spec_for("vulkan") == scene.spec_for("numba")._replace(LIST_BY_PARTICLE=False)
+    assert scene.spec_for("vulkan") == scene.spec_for("numba")._replace(LIST_BY_PARTICLE=False, LIST_CHUNKS=True)
     with Simulation(scene, "numba") as sim:
         sim.advance(40)  # the column collapsing into the corner: images of both walls
         moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
     stages = [s for s in plan(scene) if s.name in ("compute_density", "compute_forces") or not s.name.startswith(
         ("compute_", "reduce_dt", "choose_dt", "integrate"))]
     accelerations, counts = {}, {}
-    for slots in (0, 26, 8):
+    for slots, chunks in ((0, False), (26, False), (8, False), (26, True), (8, True)):
         state = empty_state(scene.params(sim.n), max_neighbours=slots)
         state.update({k: v.copy() for k, v in moving.items()})
-        b = make_backend(backend, scene.params(sim.n), state, stages, scene.spec._replace(MAX_NEIGHBOURS=slots))
+        spec = scene.spec._replace(MAX_NEIGHBOURS=slots, LIST_CHUNKS=chunks)
+        b = make_backend(backend, scene.params(sim.n), state, stages, spec)
         try:
             for stage in stages:
                 b.run_stage(stage)
             out = b.read()
-            accelerations[slots], counts[slots] = out["particle_a"], out["dfsph_neighbour_count"]
+            accelerations[slots, chunks], counts[slots, chunks] = out["particle_a"], out["dfsph_neighbour_count"]
         finally:
             b.close()
-    assert np.abs(accelerations[0]).max() > 9.81 * 1.01  # more than gravity acts
-    assert 0 < (counts[8] > 8).sum() < sim.n and counts[26].max() <= 26  # lists too short for some, not all
-    assert np.array_equal(accelerations[26], accelerations[0])
-    assert np.array_equal(accelerations[8], accelerations[0])
+    assert np.abs(accelerations[0, False]).max() > 9.81 * 1.01  # more than gravity acts
+    assert 0 < (counts[8, True] > 8).sum() < sim.n and counts[26, True].max() <= 26  # too short for some, not all
+    for key in accelerations:
+        assert np.array_equal(accelerations[key], accelerations[0, False]), key
+
+
+@pytest.mark.parametrize("backend", ["numba", "vulkan"])
+def test_both_list_layouts_hold_the_same_lists(backend):
+    """compute_density writes the same lists particle-major (slot s of particle i at word i slots + s), slot-major
+    (s n + i) and slot-major in chunks (LIST_CHUNKS: lane s % 4 of the 4-word chunk (s // 4) n + i, the scan
+    storing whole chunks): read here word by word, not through list_entries, with slot counts that are no
+    multiple of 4 (26; 7: most lists overflow). Nothing is written past n times the slots (rounded up to 4 in
+    chunks)."""
+    from sphcore.backends import empty_state, make_backend, plan
+    if backend == "vulkan":
+        vulkan_or_skip()
+    scene = scene_of(**{"physics.pressure_solver": "state_equation"})
+    with Simulation(scene, "numba") as sim:
+        sim.advance(40)  # the column collapsing into the corner: images of both walls
+        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
+    n = sim.n
+    stages = plan(scene)[:plan(scene).index(Stage("compute_density")) + 1]
+    for slots in (26, 7):
+        width = (slots + 3) // 4 * 4
+        lists, counts = {}, {}
+        for layout in ("particle", "slot", "chunk"):
+            spec = scene.spec._replace(MAX_NEIGHBOURS=slots, LIST_BY_PARTICLE=layout == "particle",
+                                       LIST_CHUNKS=layout == "chunk")
+            state = empty_state(scene.params(n), max_neighbours=slots)
+            state.update({k: v.copy() for k, v in moving.items()})
+            state["dfsph_neighbours"] = np.full(n * width + 64, 0xFFFFFFFF, np.uint32)
+            b = make_backend(backend, scene.params(n), state, stages, spec)
+            try:
+                for stage in stages:
+                    b.run_stage(stage)
+                out = b.read()
+            finally:
+                b.close()
+            words, count = out["dfsph_neighbours"], out["dfsph_neighbour_count"]
+            assert (words[n * (width if layout == "chunk" else slots):] == 0xFFFFFFFF).all(), (slots, layout)
+            word_of = {"particle": lambda i, s: i * slots + s, "slot": lambda i, s: s * n + i,
+                       "chunk": lambda i, s: 4 * ((s // 4) * n + i) + s % 4}[layout]
+            found = np.zeros((n, slots), np.int64)
+            for i in range(n):
+                for s in range(min(count[i], slots)):
+                    found[i, s] = words[word_of(i, s)]
+            assert np.array_equal(counted_lists(out, spec), found), (slots, layout)
+            lists[layout], counts[layout] = found, count
+        for layout in ("slot", "chunk"):
+            assert np.array_equal(counts[layout], counts["particle"]), (slots, layout)
+            assert np.array_equal(lists[layout], lists["particle"]), (slots, layout)
+        assert (counts["particle"] > 0).all() and (slots > 7 or (counts["particle"] > slots).sum() > n / 2), slots
+        assert (lists["particle"] >> IMAGE_SHIFT != 0).any()
 
 
 @pytest.mark.parametrize("backend", ["numba", "vulkan"])

@@ -32,6 +32,7 @@ layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
 layout(std430, binding = 17) writeonly buffer ParticleDrho { real particle_drho[]; };
 layout(std430, binding = 29) buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 29) buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks: dfsph.glsl)
 layout(std430, binding = 30) writeonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 
 // Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
@@ -49,6 +50,9 @@ uint neighbour_hash(uint id, uint image) {
 // then summed over the list in the scan's order and self taken out of it (listed_sum): the same bits as the scan
 // with the branch. Before a cell range that could fill the list, it is summed, and the scan goes on with the branch.
 const bool LIST_FIRST = BRANCH_FREE_SCAN && MAX_NEIGHBOURS > 0u && !CONTINUITY && !NEIGHBOUR_STATS;
+// A list in chunks (LIST_CHUNKS, dfsph.glsl: list_slot) is written a chunk of 4 entries at a time, gathered in
+// `chunk`: one 16-byte store where the GPU paid for four scattered ones (a list-first scan writes entry by entry).
+const bool CHUNKED = LIST_CHUNKS && !LIST_BY_PARTICLE && !LIST_FIRST;
 
 // Adds kernel_w over the `count` entries of i's list (a list-first scan's, self among them) to sum_w in the
 // list's order, and takes self out of the list: returns the others' count.
@@ -95,7 +99,7 @@ void main() {
     //     is within h of xi's own image xm, so the cells searched are those around xm.
     //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
     //     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
-    //     (LIST_FIRST: every candidate first, summed from the list after)
+    //     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4)
     real sum_w = real(0.0);
     real sum_div = real(0.0);
     real sum_diffusion = real(0.0);
@@ -103,6 +107,7 @@ void main() {
     uint fingerprint = 0u;
     uint count = 0u;
     bool listing = LIST_FIRST;
+    uvec4 chunk = uvec4(0u);
     for (uint image = 0u; image < 8u; ++image) {
         if ((image & ~mirrored) != 0u) continue;
         bool fx = (image & 1u) != 0u;
@@ -143,7 +148,15 @@ void main() {
                         fingerprint += neighbour_hash(particle_id[j], image);
                     }
                     if (MAX_NEIGHBOURS > 0u && (j != i || image != 0u)) {
-                        if (count < MAX_NEIGHBOURS) dfsph_neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
+                        if (count < MAX_NEIGHBOURS) {
+                            uint pair = j | (image << IMAGE_SHIFT);
+                            if (CHUNKED) {
+                                chunk[count & 3u] = pair;
+                                if ((count & 3u) == 3u) dfsph_chunks[chunk_index(i, count)] = chunk;
+                            } else {
+                                dfsph_neighbours[list_slot(i, count)] = pair;
+                            }
+                        }
                         count += 1u;
                     }
                 }
@@ -166,6 +179,8 @@ void main() {
         }
     }
     if (listing) count = listed_sum(i, xi, wall, count, sum_w);
+    uint kept = min(count, MAX_NEIGHBOURS);
+    if (CHUNKED && (kept & 3u) != 0u) dfsph_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
     // [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
     //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;

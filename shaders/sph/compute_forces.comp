@@ -29,6 +29,7 @@ layout(std430, binding = 4) readonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };  // (unread: named by
                                                                                            // neighbour_list.glsl)
@@ -60,13 +61,14 @@ void main() {
     bool listed = MAX_NEIGHBOURS > 0u && dfsph_neighbour_count[i] <= MAX_NEIGHBOURS;
     if (listed) {
         uint count = dfsph_neighbour_count[i];
+        uvec4 chunk = uvec4(0u);
         for (uint slot = 0u; slot < count; ++slot) {
             uint j;
             uint image;
             real3 r;
             real r2;
             real rlen;
-            real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
+            real3 r_hat = listed_pair(i, slot, chunk, xi, wall, inward, j, image, r, r2, rlen);
             real grad = pair_gradient(r2, rlen, image);
             real rhoj = particle_rho[j];
             if (!DFSPH) {

@@ -37,3 +37,5 @@ layout(constant_id = 22) const bool LIST_BY_PARTICLE = false; // the lists parti
                                                           // else slot-major (dfsph.glsl: list_slot)
 layout(constant_id = 24) const bool BRANCH_FREE_SCAN = false; // compute_density lists first, with no branch on
                                                           // the distance (the numba backend times both scans)
+layout(constant_id = 25) const bool LIST_CHUNKS = false;  // slot-major lists in chunks of 4 slots (Scene.spec_for:
+                                                          // Vulkan's state equation; dfsph.glsl: list_slot)

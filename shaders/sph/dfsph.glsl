@@ -13,7 +13,7 @@
 // compute_density's scan of the grid cells also writes each particle's neighbour list: its
 // neighbours and their wall and obstacle images within h, in the scan's order, as j | image << IMAGE_SHIFT
 // in dfsph_neighbours[list_slot(i, slot)] (slot < MAX_NEIGHBOURS: on Vulkan consecutive invocations read consecutive
-// words), their number in dfsph_neighbour_count[i]. dfsph_factor, every sweep of the solves and
+// words, or chunks of 4), their number in dfsph_neighbour_count[i]. dfsph_factor, every sweep of the solves and
 // compute_forces walk that list (neighbour_list.glsl: listed_pair): the sums
 // run in the scan's order, with the same terms, over about a third (2D) or a seventh (3D) of the candidates.
 // The sweeps use each entry's g = V grad_i W_ij as dfsph_factor computes it (listed_gradient): with the
@@ -86,8 +86,24 @@ uint dispatch_base(uint solve) { return CONTROL_DISPATCH + 8u * (solve - 1u); }
 // that a work group's invocations touch consecutive words; particle-major with LIST_BY_PARTICLE (numba,
 // Scene.spec_for), so that one thread walks one particle's slots in order (the other layout on the other
 // backend was measured slower on both: H200 1 M particles 0.81 -> 1.31 ms a WCSPH step; numba 64,000
-// 13.8 -> 13.3 ms, DFSPH 9,600 particles 10.1 -> 9.2 ms).
-uint list_slot(uint i, uint slot) { return LIST_BY_PARTICLE ? i * MAX_NEIGHBOURS + slot : slot * P.n + i; }
+// 13.8 -> 13.3 ms, DFSPH 9,600 particles 10.1 -> 9.2 ms). With LIST_CHUNKS (Vulkan's state equation) the
+// slot-major list is kept in chunks of 4 slots (chunk_index: chunk c of particle i is the 16 bytes at c n + i,
+// which the shaders also declare as dfsph_chunks, uvec4): the scan stores 4 entries at once, where the GPU
+// paid for each scattered word, and a walk loads them at once (neighbour_list.glsl: listed_word). Measured
+// on the H200 at 1 M particles: the state equation's step 0.81 -> 0.74 ms (compute_density 0.39 -> 0.34 ms),
+// DFSPH's 2.64 -> 2.70 ms in its stages (its sweeps read the lists ten times a step and were slower by
+// chunks), so DFSPH keeps the words. A list holds its slots rounded up to a whole chunk
+// (sphcore.sph.dfsph.list_width).
+uint chunk_index(uint i, uint slot) { return (slot >> 2u) * P.n + i; }
+
+// chunk[lane], by selects: read through a variable index, the walks' chunk was kept in memory instead of registers
+// (the H200's compute_forces took 0.27 instead of 0.21 ms at 1 M particles). compute_density's scan writes
+// chunk[lane] as it is: by selects that scan took 0.43 instead of 0.40 ms.
+uint lane_of(uvec4 chunk, uint lane) { return lane == 0u ? chunk.x : lane == 1u ? chunk.y : lane == 2u ? chunk.z : chunk.w; }
+uint list_slot(uint i, uint slot) {
+    if (LIST_BY_PARTICLE) return i * MAX_NEIGHBOURS + slot;
+    return LIST_CHUNKS ? chunk_index(i, slot) * 4u + (slot & 3u) : slot * P.n + i;
+}
 
 // dfsph_state (float): tolerances (host) and errors
 const uint STATE_TOLERANCE = 0u;        // [STATE_TOLERANCE + solve]: fluid.max_divergence_error, max_density_error

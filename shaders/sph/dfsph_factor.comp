@@ -30,6 +30,7 @@ layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 25) readonly buffer DfsphState { float dfsph_state[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 layout(std430, binding = 31) writeonly buffer DfsphGradients { real4 dfsph_gradients[]; };
 layout(std430, binding = 19) writeonly buffer ParticleVh { real4 particle_gradient_sum[]; };  // (DFSPH: no Verlet)
@@ -65,6 +66,7 @@ void main() {
     real3 sum_grad = real3(0.0);
     real sum_grad2 = real(0.0);
     uint count = dfsph_neighbour_count[i];
+    uvec4 chunk = uvec4(0u);
     for (uint slot = 0u; slot < min(count, MAX_NEIGHBOURS); ++slot) {
         // [4] the neighbour j, or its image, and the direction from it to i (neighbour_list.glsl)
         uint j;
@@ -72,7 +74,7 @@ void main() {
         real3 r;
         real r2;
         real rlen;
-        real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
+        real3 r_hat = listed_pair(i, slot, chunk, xi, wall, inward, j, image, r, r2, rlen);
         real g = coef * pair_gradient(r2, rlen, image);
         real3 grad = g * r_hat;
         sum_grad -= grad;

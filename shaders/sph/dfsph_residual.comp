@@ -39,6 +39,7 @@ layout(std430, binding = 25) buffer DfsphState { float dfsph_state[]; };
 layout(std430, binding = 26) writeonly buffer DfsphHistory { float dfsph_history[]; };
 layout(std430, binding = 28) coherent buffer DfsphPartial { real dfsph_partial[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };
 layout(std430, binding = 19) readonly buffer ParticleVh { real4 particle_gradient_sum[]; };  // (DFSPH: no Verlet)
@@ -71,12 +72,13 @@ void main() {
         real3 sum_g = particle_gradient_sum[i].xyz;
         real d = vi.x * sum_g.x + vi.y * sum_g.y + vi.z * sum_g.z;
         uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+        uvec4 chunk = uvec4(0u);
         for (uint slot = 0u; slot < count; ++slot) {
             // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
             //     g = V grad_i W_ik (neighbour_list.glsl)
             uint j;
             uint image;
-            real3 g = listed_gradient(i, slot, xi, wall, inward, j, image);
+            real3 g = listed_gradient(i, slot, chunk, xi, wall, inward, j, image);
             // [6] the neighbour's velocity; an image's mirrored on the flipped axes
             real3 vk = density ? particle_vstar[j].xyz : particle_v[j].xyz;
             if (image != 0u) {

@@ -34,6 +34,7 @@ layout(std430, binding = 23) readonly buffer ParticleResidual { real particle_re
 layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
+layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
 layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };
 #include "neighbour_list.glsl"
@@ -61,11 +62,12 @@ void main() {
     // [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
     real3 change = real3(0.0);
     uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+    uvec4 chunk = uvec4(0u);
     for (uint slot = 0u; slot < count; ++slot) {
         // [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
         uint j;
         uint image;
-        real3 g = listed_gradient(i, slot, xi, wall, inward, j, image);
+        real3 g = listed_gradient(i, slot, chunk, xi, wall, inward, j, image);
         // [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
         real sj = scale * particle_alpha[j] * particle_residual[j];
         if (warm) {

@@ -1,15 +1,24 @@
 // The neighbour lists (dfsph.glsl: written by compute_density's scan), walked by compute_forces, and under
 // DFSPH by dfsph_factor (which stores each entry's gradient), dfsph_residual and dfsph_velocity (which read
-// them). Needs particle_x, dfsph_neighbours and dfsph_gradients declared by the shader that includes this
-// file (after cells.glsl, kernels.glsl, pairs.glsl and dfsph.glsl).
+// them). Needs particle_x, dfsph_neighbours, dfsph_chunks (the same buffer as uvec4) and dfsph_gradients
+// declared by the shader that includes this file (after cells.glsl, kernels.glsl, pairs.glsl and dfsph.glsl).
+// A walk goes through the slots from 0 in order, keeping the last chunk it loaded in `chunk`.
 // Mirror: sphcore/sph/neighbour_list.py (same names, same statements).
+
+// Entry `slot` of particle i's list as written (j | image << IMAGE_SHIFT): lists in chunks (LIST_CHUNKS) are read
+// a chunk of 4 slots at a time, one 16-byte load at each fourth slot (dfsph.glsl: list_slot).
+uint listed_word(uint i, uint slot, inout uvec4 chunk) {
+    if (LIST_BY_PARTICLE || !LIST_CHUNKS) return dfsph_neighbours[list_slot(i, slot)];
+    if ((slot & 3u) == 0u) chunk = dfsph_chunks[chunk_index(i, slot)];
+    return lane_of(chunk, slot & 3u);
+}
 
 // Entry `slot` of particle i's list: its neighbour j, or j's image across the walls and obstacle faces
 // whose bits are set in `image` (`wall`, `inward`: near_walls and near_obstacles at xi), with r = xi - x_k,
 // r2 and rlen, the squared and plain distance to it; returns the direction from it to i (pairs.glsl).
-real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uint j, out uint image,
-                  out real3 r, out real r2, out real rlen) {
-    uint pair = dfsph_neighbours[list_slot(i, slot)];
+real3 listed_pair(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, real3 inward, out uint j,
+                  out uint image, out real3 r, out real r2, out real rlen) {
+    uint pair = listed_word(i, slot, chunk);
     j = pair & NEIGHBOUR_MASK;
     image = pair >> IMAGE_SHIFT;
     real3 xk = particle_x[j].xyz;
@@ -23,18 +32,18 @@ real3 listed_pair(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uin
 // Entry `slot` of particle i's list under DFSPH: its neighbour j (`image`: the walls it is mirrored across);
 // returns g = V grad_i W_ik. With GRADIENTS, as dfsph_factor stored it this step (dfsph_gradients, in the
 // list's layout); else computed again as dfsph_factor computed it: the same bits without fused multiply-adds.
-real3 listed_gradient(uint i, uint slot, real3 xi, real3 wall, real3 inward, out uint j, out uint image) {
+real3 listed_gradient(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, real3 inward, out uint j,
+                      out uint image) {
     if (GRADIENTS) {
-        uint k = list_slot(i, slot);
-        uint pair = dfsph_neighbours[k];
+        uint pair = listed_word(i, slot, chunk);
         j = pair & NEIGHBOUR_MASK;
         image = pair >> IMAGE_SHIFT;
-        return dfsph_gradients[k].xyz;
+        return dfsph_gradients[list_slot(i, slot)].xyz;
     }
     real3 r;
     real r2;
     real rlen;
-    real3 r_hat = listed_pair(i, slot, xi, wall, inward, j, image, r, r2, rlen);
+    real3 r_hat = listed_pair(i, slot, chunk, xi, wall, inward, j, image, r, r2, rlen);
     real g = real(P.pressure_coef) / real(P.rest_density) * pair_gradient(r2, rlen, image);
     return -(g * r_hat);
 }

@@ -15,7 +15,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.density_diffusion import density_diffusion
-from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots
+from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots, store_chunk, with_lane
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
 from sphcore.sph.obstacles import obstacles
@@ -54,6 +54,9 @@ def compute_density(spec, real=np.float32):
     # same bits as the scan with the branch. Before a cell range that could fill the list, it is summed, and the
     # scan goes on with the branch.
     LIST_FIRST = spec.BRANCH_FREE_SCAN and can_list_first(spec)
+    # A list in chunks (LIST_CHUNKS, dfsph.glsl: list_slot) is written a chunk of 4 entries at a time, gathered in
+    # `chunk`: one 16-byte store where the GPU paid for four scattered ones (a list-first scan writes entry by entry).
+    CHUNKED = spec.LIST_CHUNKS and not spec.LIST_BY_PARTICLE and not LIST_FIRST
     list_slot = list_slots(spec)
     kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
     pair_direction = pairs(real)
@@ -115,7 +118,7 @@ def compute_density(spec, real=np.float32):
         #     is within h of xi's own image xm, so the cells searched are those around xm.
         #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
         #     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
-        #     (LIST_FIRST: every candidate first, summed from the list after)
+        #     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4)
         sum_w = real(0.0)
         sum_div = real(0.0)
         sum_diffusion = real(0.0)
@@ -123,6 +126,7 @@ def compute_density(spec, real=np.float32):
         fingerprint = 0
         count = 0
         listing = LIST_FIRST
+        chunk = (0, 0, 0, 0)
         for image in range(8):
             if (image & ~mirrored) != 0:
                 continue
@@ -167,7 +171,13 @@ def compute_density(spec, real=np.float32):
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
                         if MAX_NEIGHBOURS > 0 and (j != i or image != 0):
                             if count < MAX_NEIGHBOURS:
-                                dfsph_neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
+                                pair = j | (image << IMAGE_SHIFT)
+                                if CHUNKED:
+                                    chunk = with_lane(chunk, count & 3, pair)
+                                    if (count & 3) == 3:
+                                        store_chunk(P, dfsph_neighbours, i, count, chunk)
+                                else:
+                                    dfsph_neighbours[list_slot(P, i, count)] = pair
                             count += 1
                     if not CONTINUITY or r2 >= P.h2 or (j == i and image == 0):
                         continue
@@ -193,6 +203,9 @@ def compute_density(spec, real=np.float32):
         if listing:
             count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                                       count, sum_w)
+        kept = min(count, MAX_NEIGHBOURS)
+        if CHUNKED and (kept & 3) != 0:
+            store_chunk(P, dfsph_neighbours, i, kept, chunk)  # (the last chunk's rest: unread)
         # [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
         #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w

@@ -77,9 +77,10 @@ def compute_forces(spec, real=np.float32):
         listed = MAX_NEIGHBOURS > 0 and int(dfsph_neighbour_count[i]) <= MAX_NEIGHBOURS
         if listed:
             count = int(dfsph_neighbour_count[i])
+            chunk = (0, 0, 0, 0)
             for slot in range(count):
-                j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                    P, particle_x, dfsph_neighbours, i, slot, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+                chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+                    P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
                     inward_y, inward_z)
                 grad = pair_gradient(P, r2, rlen, image)
                 rhoj = particle_rho[j]

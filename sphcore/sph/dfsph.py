@@ -37,16 +37,57 @@ def dispatch_base(solve):
     return CONTROL_DISPATCH + 8 * (solve - 1)
 
 
+def list_width(slots):
+    """Words a particle's list of `slots` slots takes: whole chunks of 4 slots (LIST_CHUNKS's, in every layout)."""
+    return (slots + 3) // 4 * 4
+
+
+@njit
+def chunk_index(P, i, slot):
+    """Chunk of 4 slots (16 bytes) that holds slot `slot` of particle i's slot-major list."""
+    return (slot >> 2) * P.n + i
+
+
+@njit
+def lane_of(chunk, lane):
+    """chunk[lane], by selects (dfsph.glsl: a GPU may keep a vector indexed by a variable in memory)."""
+    return chunk[0] if lane == 0 else chunk[1] if lane == 1 else chunk[2] if lane == 2 else chunk[3]
+
+
+@njit
+def with_lane(chunk, lane, value):
+    """GLSL `chunk[lane] = value` for a uvec4 chunk, here a 4-tuple (a new one)."""
+    return (value if lane == 0 else chunk[0], value if lane == 1 else chunk[1], value if lane == 2 else chunk[2],
+            value if lane == 3 else chunk[3])
+
+
+@njit
+def store_chunk(P, dfsph_neighbours, i, slot, chunk):
+    """GLSL `dfsph_chunks[chunk_index(i, slot)] = chunk`: the 4 words of the chunk that holds `slot`."""
+    word = chunk_index(P, i, slot) * 4
+    for lane in range(4):
+        dfsph_neighbours[word + lane] = chunk[lane]
+
+
+@njit
+def load_chunk(P, dfsph_neighbours, i, slot):
+    """GLSL `dfsph_chunks[chunk_index(i, slot)]`: the 4 words of the chunk that holds `slot`, as a 4-tuple."""
+    word = chunk_index(P, i, slot) * 4
+    return (int(dfsph_neighbours[word]), int(dfsph_neighbours[word + 1]), int(dfsph_neighbours[word + 2]),
+            int(dfsph_neighbours[word + 3]))
+
+
 @lru_cache(maxsize=None)
 def list_slots(spec):
-    """`list_slot(P, i, slot)` of the spec's list layout (LIST_BY_PARTICLE: particle-major, else slot-major)."""
-    MAX_NEIGHBOURS, LIST_BY_PARTICLE = spec.MAX_NEIGHBOURS, spec.LIST_BY_PARTICLE
+    """`list_slot(P, i, slot)` of the spec's list layout (LIST_BY_PARTICLE: particle-major, else slot-major, with
+    LIST_CHUNKS in chunks of 4 slots)."""
+    MAX_NEIGHBOURS, LIST_BY_PARTICLE, LIST_CHUNKS = spec.MAX_NEIGHBOURS, spec.LIST_BY_PARTICLE, spec.LIST_CHUNKS
 
     @njit
     def list_slot(P, i, slot):
         if LIST_BY_PARTICLE:
             return i * MAX_NEIGHBOURS + slot
-        return slot * P.n + i
+        return chunk_index(P, i, slot) * 4 + (slot & 3) if LIST_CHUNKS else slot * P.n + i
 
     return list_slot
 

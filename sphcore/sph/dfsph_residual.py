@@ -66,11 +66,13 @@ def dfsph_residual(spec, real=np.float32):
         sum_g_z = particle_gradient_sum[i, 2]
         d = vi_x * sum_g_x + vi_y * sum_g_y + vi_z * sum_g_z
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        chunk = (0, 0, 0, 0)
         for slot in range(count):
             # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
             #     g = V grad_i W_ik (neighbour_list.glsl)
-            j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot, xi_x,
-                                                      xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z)
+            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot,
+                                                             chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+                                                             inward_y, inward_z)
             # [6] the neighbour's velocity; an image's mirrored on the flipped axes
             vk_x = particle_vstar[j, 0] if density else particle_v[j, 0]
             vk_y = particle_vstar[j, 1] if density else particle_v[j, 1]

@@ -60,10 +60,12 @@ def dfsph_velocity(spec, real=np.float32):
         change_y = real(0.0)
         change_z = real(0.0)
         count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        chunk = (0, 0, 0, 0)
         for slot in range(count):
             # [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
-            j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot, xi_x,
-                                                      xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z)
+            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot,
+                                                             chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+                                                             inward_y, inward_z)
             # [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
             sj = scale * particle_alpha[j] * particle_residual[j]
             if warm:
