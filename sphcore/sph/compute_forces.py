@@ -80,8 +80,8 @@ def compute_forces(spec, real=np.float32):
             chunk = (0, 0, 0, 0)
             for slot in range(count):
                 chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                    P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
-                    inward_y, inward_z)
+                    P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
+                    inward_x, inward_y, inward_z)
                 grad = pair_gradient(P, r2, rlen, image)
                 rhoj = particle_rho[j]
                 if not DFSPH:

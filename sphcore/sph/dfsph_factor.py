@@ -70,8 +70,8 @@ def dfsph_factor(spec, real=np.float32):
         for slot in range(min(count, MAX_NEIGHBOURS)):
             # [4] the neighbour j, or its image, and the direction from it to i (neighbour_list.glsl)
             chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
-                inward_z)
+                P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+                inward_y, inward_z)
             g = coef * pair_gradient(P, r2, rlen, image)
             grad_x = g * r_hat_x
             grad_y = g * r_hat_y
