@@ -57,14 +57,44 @@ def plot(record, path):
     print(f"wrote {path}")
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def peer_arguments(doc, out):
+    """The command line of a GPU peer benchmark (this one, peer_warp_gpu.py): counts, timing, output, --plot."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--counts", type=ints, default=[65536, 262144, 1000000, 8000000])
     ap.add_argument("--min-seconds", type=float, default=3.0)
     ap.add_argument("--steps-per-submit", type=int, default=64)
-    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/peer_taichi_gpu.json"))
+    ap.add_argument("--out", type=Path, default=Path(out))
     ap.add_argument("--plot", type=Path, help="only draw the PNG of this JSON")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def peer_record(name, args, **peer_versions):
+    """The JSON record of a GPU peer benchmark, before its rows."""
+    return {"benchmark": name, "device": None, "versions": versions() | peer_versions | {
+                "platform": platform.platform()},
+            "sphcore_git": sphcore_revision(), "steps_per_submit": args.steps_per_submit,
+            "min_seconds": args.min_seconds, "rows": []}
+
+
+def time_sphcore(n, args):
+    """(device, timings) of sphcore's case on Vulkan at n particles (steps_per_second.py's 3D grid case)."""
+    return time_case("vulkan", n, 3, "grid", 128, args.steps_per_submit, args.steps_per_submit, args.min_seconds)
+
+
+def save(record, args, plot):
+    """Writes the record to --out (after every row: a run cut short keeps its rows), and the PNG when done."""
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
+    if len(record["rows"]) < len(args.counts):
+        return
+    try:
+        plot(record, args.out.with_suffix(".png"))
+    except ImportError:
+        print(f"no matplotlib here: draw the PNG with --plot {args.out}")
+
+
+def main():
+    args = peer_arguments(__doc__, "benchmarks/results/peer_taichi_gpu.json")
     if args.plot:
         return plot(json.loads(args.plot.read_text()), args.plot.with_suffix(".png"))
     try:
@@ -72,14 +102,11 @@ def main():
     except ImportError:
         sys.exit("taichi is not importable: pip install taichi (or unzip .taichi/taichi_trim.zip, see --help)")
 
-    record = {"benchmark": "peer_taichi_gpu", "device": None, "versions": versions() | {
-                  "taichi": ".".join(map(str, ti.__version__)), "platform": platform.platform()},
-              "sphcore_git": sphcore_revision(), "steps_per_submit": args.steps_per_submit,
-              "min_seconds": args.min_seconds, "scene": make_case(args.counts[0], 3, "grid")[0].config, "rows": []}
+    record = peer_record("peer_taichi_gpu", args, taichi=".".join(map(str, ti.__version__)))
+    record["scene"] = make_case(args.counts[0], 3, "grid")[0].config
     print(f"{'N':>9} {'sphcore p-steps/s':>18} {'Taichi p-steps/s':>17} {'ratio':>6}", flush=True)
     for n in args.counts:
-        device, mine = time_case("vulkan", n, 3, "grid", 128, args.steps_per_submit, args.steps_per_submit,
-                                 args.min_seconds)
+        device, mine = time_sphcore(n, args)
         scene, x0 = make_case(n, 3, "grid")
         theirs = run_taichi(ti, scene, x0, 0, args.min_seconds, arch=ti.cuda)
         ratio = mine["particle_steps_per_second"] / theirs["particle_steps_per_second"]
@@ -87,12 +114,7 @@ def main():
         record["rows"].append({"n": n, "sphcore_vulkan": mine, "taichi_cuda": theirs, "ratio_sphcore_over_taichi": ratio})
         print(f"{n:>9} {mine['particle_steps_per_second']:>18.4g} {theirs['particle_steps_per_second']:>17.4g} "
               f"{ratio:>6.2f}  ({device}; finite: {mine['finite']}, {theirs['finite']})", flush=True)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
-    try:
-        plot(record, args.out.with_suffix(".png"))
-    except ImportError:
-        print(f"no matplotlib here: draw the PNG with --plot {args.out}")
+        save(record, args, plot)
 
 
 if __name__ == "__main__":

@@ -34,11 +34,9 @@ then the first call (carry .warp_a) `mkdir -p /tmp/wparts && cp .warp_a/part /tm
     mkdir -p /tmp/warp && cat /tmp/wparts/part_a .warp_b/part | xz -d | tar -x -C /tmp/warp
     PYTHONPATH=/tmp/warp:/tmp/site:. python3 benchmarks/peer_warp_gpu.py --out $OUT/peer_warp_gpu.json
 """
-import argparse
 import contextlib
 import io
 import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -46,8 +44,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmarks.peer_taichi_cpu import sphcore_revision  # noqa: E402
-from benchmarks.steps_per_second import ints, make_case, time_case, versions  # noqa: E402
+from benchmarks.peer_taichi_gpu import peer_arguments, peer_record, save, time_sphcore  # noqa: E402
+from benchmarks.steps_per_second import make_case  # noqa: E402
 
 
 def within(x, h, sample=256, seed=0):
@@ -134,13 +132,7 @@ def plot(record, path):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--counts", type=ints, default=[65536, 262144, 1000000, 8000000])
-    ap.add_argument("--min-seconds", type=float, default=3.0)
-    ap.add_argument("--steps-per-submit", type=int, default=64)
-    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/peer_warp_gpu.json"))
-    ap.add_argument("--plot", type=Path, help="only draw the PNG of this JSON")
-    args = ap.parse_args()
+    args = peer_arguments(__doc__, "benchmarks/results/peer_warp_gpu.json")
     if args.plot:
         return plot(json.loads(args.plot.read_text()), args.plot.with_suffix(".png"))
     try:
@@ -150,15 +142,11 @@ def main():
         sys.exit("warp is not importable: pip install warp-lang (see --help)")
     wp.init()
 
-    record = {"benchmark": "peer_warp_gpu", "device": None, "versions": versions() | {
-                  "warp": wp.config.version, "platform": platform.platform()},
-              "sphcore_git": sphcore_revision(), "steps_per_submit": args.steps_per_submit,
-              "min_seconds": args.min_seconds, "rows": []}
+    record = peer_record("peer_warp_gpu", args, warp=wp.config.version)
     print(f"{'N':>9} {'sphcore p-steps/s':>18} {'within h':>8} {'Warp N':>9} {'Warp p-steps/s':>15} {'within h':>8} "
           f"{'ratio':>6} {'pairs ratio':>11}", flush=True)
     for n in args.counts:
-        device, mine = time_case("vulkan", n, 3, "grid", 128, args.steps_per_submit, args.steps_per_submit,
-                                 args.min_seconds)
+        device, mine = time_sphcore(n, args)
         scene, x0 = make_case(n, 3, "grid")
         mine["within_h"] = within(x0, scene.h)  # (the lattice before it moves: the case's own neighbourhood)
         theirs = run_warp(ex, n, args.min_seconds)
@@ -172,12 +160,7 @@ def main():
         print(f"{n:>9} {mine['particle_steps_per_second']:>18.4g} {mine['within_h']:>8.1f} {theirs['n']:>9} "
               f"{theirs['particle_steps_per_second']:>15.4g} {theirs['within_h']:>8.1f} {ratio:>6.2f} {pairs:>11.2f}"
               f"  ({device}, Warp on {theirs['device']}; finite: {mine['finite']}, {theirs['finite']})", flush=True)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(record, indent=1, default=float) + "\n")
-    try:
-        plot(record, args.out.with_suffix(".png"))
-    except ImportError:
-        print(f"no matplotlib here: draw the PNG with --plot {args.out}")
+        save(record, args, plot)
 
 
 if __name__ == "__main__":

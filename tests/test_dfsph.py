@@ -13,7 +13,7 @@ import pytest
 
 from conftest import VALIDATION, assert_stage_agrees, schedule_dependent, vulkan_or_skip
 from reference import neighbours
-from sphcore.backends import Stage, empty_state, list_entries, plan
+from sphcore.backends import Stage, empty_state, list_entries, make_backend, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation, SimulationError, run
@@ -71,6 +71,17 @@ def test_default_scenes_are_unchanged_and_dfsph_adds_its_solves():
     assert stages.count("dfsph_residual") == 2 * (1 + 5) + 1 and stages.count("dfsph_velocity") == 2 * 5 + 1
     assert "dfsph_check" not in stages
     assert stages[-1] == "integrate"
+
+
+def run_stages(backend, params, state, stages, spec, **options):
+    """The buffers after `stages` ran once, in order, over `state` on a new `backend`."""
+    b = make_backend(backend, params, state, stages, spec, **options)
+    try:
+        for stage in stages:
+            b.run_stage(stage)
+        return b.read()
+    finally:
+        b.close()
 
 
 def counted_lists(state, spec):
@@ -237,7 +248,6 @@ def test_forces_walk_the_list_as_the_scan_would(backend):
     """Under DFSPH compute_forces walks the step's list (compute_density's). The same state through the state
     equation's compute_forces (the cell scan), its pressures zeroed so that viscosity, cohesion and gravity
     alone act, gives bitwise the same accelerations: the same pairs in the same order."""
-    from sphcore.backends import make_backend
     if backend == "vulkan":
         vulkan_or_skip()
     scene = scene_of(**{"physics.surface_tension": True})
@@ -251,12 +261,8 @@ def test_forces_walk_the_list_as_the_scan_would(backend):
     accelerations = {}
     for s in (scene, wcsph):  # (DFSPH: numba's list layout, particle-major, which either backend reads)
         spec = sim.spec if s.dfsph else s.spec
-        b = make_backend(backend, s.params(len(state["particle_id"])), state, [Stage("compute_forces")], spec)
-        try:
-            b.run_stage(Stage("compute_forces"))
-            accelerations[s.dfsph] = b.read()["particle_a"]
-        finally:
-            b.close()
+        out = run_stages(backend, s.params(len(state["particle_id"])), state, [Stage("compute_forces")], spec)
+        accelerations[s.dfsph] = out["particle_a"]
     assert np.abs(accelerations[True]).max() > 9.81 * 1.01  # more than gravity acts
     assert np.array_equal(accelerations[True], accelerations[False])
 
@@ -267,7 +273,6 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
     compute_forces walks them. Its accelerations are bitwise those of the cell scan (MAX_NEIGHBOURS 0), also
     with lists too short for most particles (8 slots: those are scanned), on both backends, with the lists in
     words and in chunks of 4 slots (LIST_CHUNKS, Vulkan's; 26 slots: a last chunk of 2)."""
-    from sphcore.backends import empty_state, make_backend, plan
     if backend == "vulkan":
         vulkan_or_skip()
     scene = scene_of(**{"physics.pressure_solver": "state_equation", "physics.surface_tension": True})
@@ -282,15 +287,9 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
     for slots, chunks in ((0, False), (26, False), (8, False), (26, True), (8, True)):
         state = empty_state(scene.params(sim.n), max_neighbours=slots)
         state.update({k: v.copy() for k, v in moving.items()})
-        spec = scene.spec._replace(MAX_NEIGHBOURS=slots, LIST_CHUNKS=chunks)
-        b = make_backend(backend, scene.params(sim.n), state, stages, spec)
-        try:
-            for stage in stages:
-                b.run_stage(stage)
-            out = b.read()
-            accelerations[slots, chunks], counts[slots, chunks] = out["particle_a"], out["dfsph_neighbour_count"]
-        finally:
-            b.close()
+        out = run_stages(backend, scene.params(sim.n), state, stages,
+                         scene.spec._replace(MAX_NEIGHBOURS=slots, LIST_CHUNKS=chunks))
+        accelerations[slots, chunks], counts[slots, chunks] = out["particle_a"], out["dfsph_neighbour_count"]
     assert np.abs(accelerations[0, False]).max() > 9.81 * 1.01  # more than gravity acts
     assert 0 < (counts[8, True] > 8).sum() < sim.n and counts[26, True].max() <= 26  # too short for some, not all
     for key in accelerations:
@@ -304,7 +303,6 @@ def test_both_list_layouts_hold_the_same_lists(backend):
     storing whole chunks): read here word by word, not through list_entries, with slot counts that are no
     multiple of 4 (26; 7: most lists overflow). Nothing is written past n times the slots (rounded up to 4 in
     chunks)."""
-    from sphcore.backends import empty_state, make_backend, plan
     if backend == "vulkan":
         vulkan_or_skip()
     scene = scene_of(**{"physics.pressure_solver": "state_equation"})
@@ -322,13 +320,7 @@ def test_both_list_layouts_hold_the_same_lists(backend):
             state = empty_state(scene.params(n), max_neighbours=slots)
             state.update({k: v.copy() for k, v in moving.items()})
             state["dfsph_neighbours"] = np.full(n * width + 64, 0xFFFFFFFF, np.uint32)
-            b = make_backend(backend, scene.params(n), state, stages, spec)
-            try:
-                for stage in stages:
-                    b.run_stage(stage)
-                out = b.read()
-            finally:
-                b.close()
+            out = run_stages(backend, scene.params(n), state, stages, spec)
             words, count = out["dfsph_neighbours"], out["dfsph_neighbour_count"]
             assert (words[n * (width if layout == "chunk" else slots):] == 0xFFFFFFFF).all(), (slots, layout)
             word_of = {"particle": lambda i, s: i * slots + s, "slot": lambda i, s: s * n + i,
@@ -357,7 +349,6 @@ def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend, variant):
     with the branch, on a column collapsing into the corner (images of the walls; in 3D, float64, also of an
     obstacle's faces), with lists of fluid.max_neighbours slots, of as many as the fullest list holds (the scan
     fills them: the branch takes over) and of 4 fewer (too short: count > slots)."""
-    from sphcore.backends import empty_state, make_backend, plan
     if backend == "vulkan" or variant:
         vulkan_or_skip()  # (the 3D state is made on lavapipe: no numba compiling of a whole plan)
     scene = scene_of(**{"physics.pressure_solver": "state_equation", **variant})
@@ -371,13 +362,7 @@ def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend, variant):
         spec = scene.spec_for(backend)._replace(MAX_NEIGHBOURS=slots, BRANCH_FREE_SCAN=free)
         state = empty_state(scene.params(sim.n), precision, scene["domain.obstacles"], max_neighbours=slots)
         state.update({k: v.copy() for k, v in moving.items()})
-        b = make_backend(backend, scene.params(sim.n), state, stages, spec, precision=precision)
-        try:
-            for stage in stages:
-                b.run_stage(stage)
-            out = b.read()
-        finally:
-            b.close()
+        out = run_stages(backend, scene.params(sim.n), state, stages, spec, precision=precision)
         return out, list_entries(out, spec)
 
     fullest = int(scan(scene.max_neighbours, False)[0]["dfsph_neighbour_count"].max())
