@@ -11,6 +11,8 @@ With --profile, each solver then runs --steps more steps with a GPU timestamp af
 The timed steps are early ones (after --warm), before the impact; --whole-run also times each full run's
 steps again from the start (the impact's iterations included). --cfl-number runs DFSPH at several CFL
 numbers (the file of CFL c under --dt-from: mm3d_<resolution>_dfsph_cfl<c>.json, dfsph_gpu.sh's CFLS).
+--list-skin s also runs WCSPH with its neighbour lists reused between builds (physics.list_skin = s: the same
+pairs and dt, fewer sorts and scans).
 
     python3 benchmarks/dfsph_steps.py --backend vulkan --resolution 40 80 --dt-from benchmarks/results/dfsph/h200 \\
         --out benchmarks/results/dfsph/h200/steps.json
@@ -44,18 +46,23 @@ def main():
                     "the scene's, 0.4); --dt-from's file for CFL c is mm3d_<resolution>_dfsph_cfl<c>.json")
     ap.add_argument("--whole-run", action="store_true", help="with --dt-from: also each full run's steps again from "
                     "the start, timed without reading the state back (the impact's iterations included)")
+    ap.add_argument("--list-skin", type=float, default=0.0, help="also WCSPH with physics.list_skin = this")
     ap.add_argument("--out")
     args = ap.parse_args()
     rows = []
-    runs = [("state_equation", None)] + [("dfsph", cfl) for cfl in args.cfl_number or [None]]
+    runs = ([("state_equation", None, 0.0)] + ([("state_equation", None, args.list_skin)] if args.list_skin else [])
+            + [("dfsph", cfl, 0.0) for cfl in args.cfl_number or [None]])
     for r in args.resolution:
-        for solver, cfl in runs:
+        for solver, cfl, skin in runs:
             label = solver if cfl is None else f"dfsph_cfl{cfl:g}"  # (and the --dt-from file's name)
             scene = dam_break_scene({"dimension": 3, "resolution": r, "depth": r, "config": SOLVERS[solver],
                                      "kernel": args.kernel, "backend": args.backend, "cfl_number": cfl})
-            if args.max_iterations and solver == "dfsph":
+            if (args.max_iterations and solver == "dfsph") or skin:
                 data = json.loads(scene.to_json())
-                data["fluid"]["max_iterations"] = args.max_iterations
+                if skin:
+                    data["physics"]["list_skin"] = skin
+                else:
+                    data["fluid"]["max_iterations"] = args.max_iterations
                 scene = Scene.from_dict(data)
             profile = Profile() if args.profile else None
             with Simulation(scene, args.backend, **({"profile": profile} if profile else {})) as sim:
@@ -69,7 +76,7 @@ def main():
                 seconds = (time.perf_counter() - start) / (args.steps // args.per_submit * args.per_submit)
                 timed = args.steps // args.per_submit * args.per_submit
                 log = sim.solver_log.array()[-timed:] if solver == "dfsph" else None
-                row = {"resolution": r, "particles": sim.n, "solver": solver, "label": label,
+                row = {"resolution": r, "particles": sim.n, "solver": solver, "label": label, "list_skin": skin,
                        "cfl_number": scene["time.cfl_number"] if solver == "dfsph" else None,
                        "ms_per_step": 1e3 * seconds,
                        "max_iterations": scene["fluid.max_iterations"] if solver == "dfsph" else None,
@@ -95,12 +102,13 @@ def main():
             print(json.dumps(row), flush=True)
     for r in args.resolution:
         mine = [row for row in rows if row["resolution"] == r]
-        for row in mine[1:] if args.dt_from else ():
-            print(f"{r} across a, {row['label']}: DFSPH / WCSPH wall time per simulated second = "
-                  f"{row['wall_per_simulated_s'] / mine[0]['wall_per_simulated_s']:.2f}" + (
+        wcsph = [row for row in mine if row["solver"] == "state_equation"]
+        for row, base in ((row, base) for row in mine if row["solver"] == "dfsph" for base in wcsph) if args.dt_from else ():
+            print(f"{r} across a, {row['label']}: DFSPH / WCSPH (list_skin {base['list_skin']:g}) wall time per "
+                  f"simulated second = {row['wall_per_simulated_s'] / base['wall_per_simulated_s']:.2f}" + (
                       f"; over the whole run {row['whole_run']['wall_per_simulated_s']:.2f} / "
-                      f"{mine[0]['whole_run']['wall_per_simulated_s']:.2f} s = "
-                      f"{row['whole_run']['wall_per_simulated_s'] / mine[0]['whole_run']['wall_per_simulated_s']:.2f}"
+                      f"{base['whole_run']['wall_per_simulated_s']:.2f} s = "
+                      f"{row['whole_run']['wall_per_simulated_s'] / base['whole_run']['wall_per_simulated_s']:.2f}"
                       if args.whole_run else ""))
     if args.out:
         Path(args.out).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))

@@ -237,6 +237,9 @@ def main():
     ap.add_argument("--min-seconds", type=float, default=3.0)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/peer_taichi_cpu.json"))
+    ap.add_argument("--list-skin", type=float, default=0.0,
+                    help="also time numba with physics.list_skin = this (its lists reused between builds); Taichi "
+                         "keeps its cells of h")
     args = ap.parse_args()
     try:
         import taichi as ti
@@ -247,14 +250,21 @@ def main():
     loadavg_at_start = os.getloadavg()  # a shared machine: other work skews both engines
     scene, x0 = make_case(args.n, 3, "grid")
     numba_row = run_numba(scene, x0, args.threads, args.min_seconds)
+    skin_row = run_numba(make_case(args.n, 3, "grid", list_skin=args.list_skin)[0], x0, args.threads,
+                         args.min_seconds) if args.list_skin else None
     taichi_row = run_taichi(ti, scene, x0, args.threads, args.min_seconds)
     ratio = numba_row["particle_steps_per_second"] / taichi_row["particle_steps_per_second"]
 
-    print(f"{'engine':<12} {'particle-steps/s':>16} {'ms/step':>9} {'steps':>6} {'median rho':>10}  finite")
-    for name, row in (("numba", numba_row), ("taichi-cpu", taichi_row)):
-        print(f"{name:<12} {row['particle_steps_per_second']:>16.4g} {row['ms_per_step']:>9.2f} {row['steps']:>6}"
-              f" {row['median_density_after_warmup']:>10.2f}  {row['finite']}")
+    print(f"{'engine':<16} {'particle-steps/s':>16} {'ms/step':>9} {'steps':>6} {'median rho':>10}  finite")
+    rows = (("numba", numba_row), (f"numba, skin {args.list_skin:g}", skin_row), ("taichi-cpu", taichi_row))
+    for name, row in rows:
+        if row is not None:
+            print(f"{name:<16} {row['particle_steps_per_second']:>16.4g} {row['ms_per_step']:>9.2f} {row['steps']:>6}"
+                  f" {row['median_density_after_warmup']:>10.2f}  {row['finite']}")
     print(f"ratio numba / taichi = {ratio:.3f}  (n = {args.n}, {args.threads} threads, {cpu_name()})")
+    if skin_row:
+        skin_ratio = skin_row["particle_steps_per_second"] / taichi_row["particle_steps_per_second"]
+        print(f"ratio numba with lists reused (physics.list_skin = {args.list_skin:g}) / taichi = {skin_ratio:.3f}")
 
     record = {"benchmark": "peer_taichi_cpu", "n": args.n, "threads": args.threads, "min_seconds": args.min_seconds,
               "versions": {"python": platform.python_version(), "numpy": np.__version__,
@@ -267,6 +277,9 @@ def main():
               "particle_steps_per_second": {"numba": numba_row["particle_steps_per_second"],
                                             "taichi": taichi_row["particle_steps_per_second"]},
               "ratio_numba_over_taichi": ratio,
+              "list_skin": args.list_skin, "numba_lists_reused": skin_row,
+              "ratio_lists_reused_over_taichi": skin_row and skin_row["particle_steps_per_second"]
+              / taichi_row["particle_steps_per_second"],
               "notes": ["Taichi side omits sphcore's mirror-image wall particles (free-slip ghosts): they touch "
                         "only particles within h of a wall; walls are the same clamp-and-reflect in both.",
                         "Taichi: counting sort into a uniform grid of cell size h (sphcore's padded size) every "

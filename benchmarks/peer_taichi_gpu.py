@@ -8,7 +8,8 @@ runs through steps_per_second.py's `time_case` (--steps-per-submit steps per com
 state on the device). Each side is timed for --min-seconds after its warm-up. Prints a table, writes
 a JSON after every count (a killed run keeps what it measured) and, where matplotlib is importable,
 a PNG beside it; `--plot FILE.json` draws the PNG from a JSON alone (the GPU machine has no
-matplotlib).
+matplotlib). With --list-skin s > 0, sphcore also runs with its lists reused between builds
+(physics.list_skin = s: the same pairs, fewer sorts), a second ratio.
 
 The GPU machine has no Taichi: its cp312 wheel without taichi/_lib/c_api (unused by the Python API),
 with dill, colorama and rich, zipped into .taichi/taichi_trim.zip (36 MB, under the 64 MiB that travel),
@@ -44,10 +45,16 @@ def plot(record, path):
     n = [r["n"] for r in rows]
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
     ax.loglog(n, [r["sphcore_vulkan"]["particle_steps_per_second"] for r in rows], "o-", label="sphcore (Vulkan)")
+    skin = record.get("list_skin", 0.0)
+    if skin:
+        ax.loglog(n, [r["sphcore_vulkan_skin"]["particle_steps_per_second"] for r in rows], "^-",
+                  label=f"sphcore, lists reused (skin {skin:g} h)")
     ax.loglog(n, [r["taichi_cuda"]["particle_steps_per_second"] for r in rows], "s-", label="Taichi (CUDA)")
     ax.set(xlabel="particles", ylabel="particle-steps per second", title=f"3D dam-break step, {record['device']}")
     ax.legend()
-    bx.semilogx(n, [r["ratio_sphcore_over_taichi"] for r in rows], "o-", color="k")
+    bx.semilogx(n, [r["ratio_sphcore_over_taichi"] for r in rows], "o-", color="k", label="sphcore / Taichi")
+    if skin:
+        bx.semilogx(n, [r["ratio_skin_over_taichi"] for r in rows], "^-", color="C2", label="lists reused / Taichi")
     bx.axhline(3.0, ls=":", color="gray", label="issue 15's target (3x)")
     bx.axhline(1.0, ls="--", color="gray")
     bx.set(xlabel="particles", ylabel="sphcore / Taichi", title="ratio, measured side by side", ylim=(0, None))
@@ -57,14 +64,18 @@ def plot(record, path):
     print(f"wrote {path}")
 
 
-def peer_arguments(doc, out):
-    """The command line of a GPU peer benchmark (this one, peer_warp_gpu.py): counts, timing, output, --plot."""
+def peer_arguments(doc, out, skin=False):
+    """The command line of a GPU peer benchmark (this one, peer_warp_gpu.py): counts, timing, output, --plot
+    (`skin`: and --list-skin)."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--counts", type=ints, default=[65536, 262144, 1000000, 8000000])
     ap.add_argument("--min-seconds", type=float, default=3.0)
     ap.add_argument("--steps-per-submit", type=int, default=64)
     ap.add_argument("--out", type=Path, default=Path(out))
     ap.add_argument("--plot", type=Path, help="only draw the PNG of this JSON")
+    if skin:
+        ap.add_argument("--list-skin", type=float, default=0.0,
+                        help="also time sphcore with physics.list_skin = this (its lists reused between builds)")
     return ap.parse_args()
 
 
@@ -73,12 +84,13 @@ def peer_record(name, args, **peer_versions):
     return {"benchmark": name, "device": None, "versions": versions() | peer_versions | {
                 "platform": platform.platform()},
             "sphcore_git": sphcore_revision(), "steps_per_submit": args.steps_per_submit,
-            "min_seconds": args.min_seconds, "rows": []}
+            "min_seconds": args.min_seconds, "list_skin": getattr(args, "list_skin", 0.0), "rows": []}
 
 
-def time_sphcore(n, args):
+def time_sphcore(n, args, list_skin=0.0):
     """(device, timings) of sphcore's case on Vulkan at n particles (steps_per_second.py's 3D grid case)."""
-    return time_case("vulkan", n, 3, "grid", 128, args.steps_per_submit, args.steps_per_submit, args.min_seconds)
+    return time_case("vulkan", n, 3, "grid", 128, args.steps_per_submit, args.steps_per_submit, args.min_seconds,
+                     list_skin=list_skin)
 
 
 def save(record, args, plot):
@@ -94,7 +106,7 @@ def save(record, args, plot):
 
 
 def main():
-    args = peer_arguments(__doc__, "benchmarks/results/peer_taichi_gpu.json")
+    args = peer_arguments(__doc__, "benchmarks/results/peer_taichi_gpu.json", skin=True)
     if args.plot:
         return plot(json.loads(args.plot.read_text()), args.plot.with_suffix(".png"))
     try:
@@ -111,9 +123,15 @@ def main():
         theirs = run_taichi(ti, scene, x0, 0, args.min_seconds, arch=ti.cuda)
         ratio = mine["particle_steps_per_second"] / theirs["particle_steps_per_second"]
         record["device"] = device
-        record["rows"].append({"n": n, "sphcore_vulkan": mine, "taichi_cuda": theirs, "ratio_sphcore_over_taichi": ratio})
+        row = {"n": n, "sphcore_vulkan": mine, "taichi_cuda": theirs, "ratio_sphcore_over_taichi": ratio}
+        if args.list_skin:
+            row["sphcore_vulkan_skin"] = time_sphcore(n, args, args.list_skin)[1]
+            row["ratio_skin_over_taichi"] = (row["sphcore_vulkan_skin"]["particle_steps_per_second"]
+                                             / theirs["particle_steps_per_second"])
+        record["rows"].append(row)
+        skinned = f" {row['ratio_skin_over_taichi']:>6.2f} with lists reused" if args.list_skin else ""
         print(f"{n:>9} {mine['particle_steps_per_second']:>18.4g} {theirs['particle_steps_per_second']:>17.4g} "
-              f"{ratio:>6.2f}  ({device}; finite: {mine['finite']}, {theirs['finite']})", flush=True)
+              f"{ratio:>6.2f}{skinned}  ({device}; finite: {mine['finite']}, {theirs['finite']})", flush=True)
         save(record, args, plot)
 
 

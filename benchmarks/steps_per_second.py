@@ -53,7 +53,7 @@ def precisions(text):
 DROP_M = 10.0  # free fall before the floor: 1.43 s = 14000 steps of dt = 1e-4 s
 
 
-def make_case(n, dim=2, search="all_pairs", spacing=0.01):
+def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0):
     """(scene, positions) for exactly n particles: see the module docstring."""
     from sphcore.scene import Scene
     if dim == 2:
@@ -71,6 +71,8 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01):
                   "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [2 * block + spacing, 1.5 * block, block + spacing]},
                   "fluid": {"stiffness": 900.0, "viscosity": 0.5}, "time": {"dt": 5e-5}}
     config["physics"] = {**config.get("physics", {}), "dimension": dim, "neighbour_search": search}
+    if list_skin:
+        config["physics"]["list_skin"] = list_skin
     config["name"] = f"bench_{dim}d_{search}_{n}"
     config["fluid"] = {**config["fluid"], "spacing": spacing, "blocks": [{"min": lo, "max": hi}]}
     scene = Scene.from_dict(config)
@@ -80,9 +82,10 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01):
 
 
 def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, min_seconds, device=None,
-              precision="float32", profile=False):
+              precision="float32", profile=False, list_skin=0.0):
     from sphcore.backends import empty_state, make_backend, plan
-    scene, x = make_case(n, dim, search)
+    from sphcore.sph.dfsph import CONTROL_BUILDS
+    scene, x = make_case(n, dim, search, list_skin=list_skin)
     params = scene.params(n)
     spec = scene.spec_for(backend)  # (neighbour lists)
     state = empty_state(params, precision, max_neighbours=spec.MAX_NEIGHBOURS)
@@ -98,7 +101,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
         t0 = time.perf_counter()
         be.step(chunk if backend == "vulkan" else 1)  # numba compiles; vulkan records and runs once
         warmup = time.perf_counter() - t0
-        be.read()  # sync
+        builds_before = int(be.read()["dfsph_control"][CONTROL_BUILDS])  # (and a sync)
         steps, start = 0, time.perf_counter()
         while True:
             be.step(chunk)
@@ -107,6 +110,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
             if seconds >= min_seconds:
                 break
         out = be.read()
+        builds = int(out["dfsph_control"][CONTROL_BUILDS]) - builds_before
         device_name = be.ctx.device_name if backend == "vulkan" else cpu_name()
         if profile:  # one more chunk, every dispatch timed (Vulkan: GPU timestamps), apart from the timing above
             from sphcore.profile import Profile, work
@@ -121,7 +125,9 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
     finite = bool(np.isfinite(xs).all() and np.isfinite(out["particle_v"]).all())
     lo, hi = np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])
     wall_gap = float(min((xs - lo).min(), (hi - xs).min()))
-    return device_name, {"n": n, "dim": dim, "search": search, "precision": precision, "local_size": local_size,
+    return device_name, {"n": n, "dim": dim, "search": search, "list_skin": list_skin,
+                         "list_builds_per_step": builds / steps if list_skin else 1.0,
+                         "precision": precision, "local_size": local_size,
                          "steps_per_submit": steps_per_submit if backend == "vulkan" else None,
                          "steps": steps, "seconds": seconds, "steps_per_second": steps / seconds,
                          "ms_per_step": 1e3 * seconds / steps, "particle_steps_per_second": n * steps / seconds,
@@ -177,6 +183,8 @@ def main():
     ap.add_argument("--min-seconds", type=float, default=1.0)
     ap.add_argument("--local-size", type=ints, default=[128])
     ap.add_argument("--steps-per-submit", type=ints, default=[64])
+    ap.add_argument("--list-skin", type=lambda t: [float(v) for v in t.split(",") if v], default=[0.0],
+                    help="physics.list_skin values (comma list): the lists reused between builds, 0: a build every step")
     ap.add_argument("--precision", type=precisions, default=["float32"], help="float32, float64 or both (comma list)")
     ap.add_argument("--device", default=None, help="Vulkan device index or name substring")
     ap.add_argument("--out", type=Path, default=None)
@@ -205,15 +213,16 @@ def main():
               "seed1_note": "seed 1 reported frames/s of its Vulkan build on a GTX 1070 (2D, all pairs)",
               "seed2_ms_per_step_cpu_gpu": {str(k): v for k, v in SEED2_MS.items()},
               "seed2_note": "seed 2 table 6.1: ms per 3D step, one Core 2 Q6600 thread / GTX 560 (grid)"}
-    print(f"{'N':>8} {'prec':>7} {'local':>5} {'spp':>4} {'steps':>6} {'seconds':>8} {'steps/s':>10} {'ms/step':>9}"
+    print(f"{'N':>8} {'skin':>5} {'builds':>6} {'prec':>7} {'local':>5} {'spp':>4} {'steps':>6} {'seconds':>8} {'steps/s':>10} {'ms/step':>9}"
           f" {'particle-steps/s':>16} {'seed':>12}  device", flush=True)
-    for n, precision, ls, spp in itertools.product(args.counts, args.precision, args.local_size, spps):
+    for n, skin, precision, ls, spp in itertools.product(args.counts, args.list_skin, args.precision, args.local_size,
+                                                         spps):
         device, row = time_case(args.backend, n, args.dim, args.search, ls, spp, min_steps, args.min_seconds,
-                                args.device, precision, args.profile)
+                                args.device, precision, args.profile, skin)
         record["device"] = device
         record["results"].append(row)
         seed = SEED1_GTX1070_FPS.get(n) if args.dim == 2 else SEED2_MS.get(n)
-        print(f"{n:>8} {precision:>7} {ls:>5} {spp or '-':>4} {row['steps']:>6} {row['seconds']:>8.3f} "
+        print(f"{n:>8} {skin:>5g} {row['list_builds_per_step']:>6.3f} {precision:>7} {ls:>5} {spp or '-':>4} {row['steps']:>6} {row['seconds']:>8.3f} "
               f"{row['steps_per_second']:>10.2f} {row['ms_per_step']:>9.3f} {row['particle_steps_per_second']:>16.4g}"
               f" {str(seed or ''):>12}  {device}" + ("" if row["finite"] else "  NON-FINITE STATE"), flush=True)
         record["host"]["loadavg_now"] = os.getloadavg()

@@ -26,9 +26,9 @@ from sphcore.sph.clear_cells import clear_cells
 from sphcore.sph.compute_density import can_list_first, compute_density
 from sphcore.sph.compute_forces import compute_forces
 from sphcore.sph.count_cells import count_cells
-from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP, CONTROL_WINDOW, HISTORY_ROWS,
-                               NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, SOLVE_WARM_START, dispatch_base,
-                               list_width)
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_REBUILD, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP,
+                               CONTROL_WINDOW, HISTORY_ROWS, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
+                               SOLVE_WARM_START, dispatch_base, list_width)
 from sphcore.sph.dfsph_factor import dfsph_factor
 from sphcore.sph.dfsph_predict import dfsph_predict
 from sphcore.sph.dfsph_residual import dfsph_residual
@@ -125,12 +125,13 @@ STAGES = {
                                                "scratch_v", "scratch_id", "particle_rho", "scratch_rho",
                                                "particle_a", "particle_vh", "particle_kappa")),
     "compute_density": (compute_density, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
-                                                       "cell_pyramid", "cell_start", "particle_id",
+                                                       "cell_pyramid", "cell_start", "scratch_x", "particle_id",
                                                        "particle_neighbours", "obstacle_box", "particle_drho",
-                                                       "dfsph_neighbours", "dfsph_neighbour_count")),
+                                                       "dfsph_control", "dfsph_neighbours", "dfsph_neighbour_count")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "particle_p", "cell_pyramid", "cell_start", "obstacle_box",
-                                                     "dfsph_neighbours", "dfsph_neighbour_count")),
+                                                     "particle_p", "cell_pyramid", "cell_start", "scratch_x",
+                                                     "obstacle_box", "dfsph_control", "dfsph_neighbours",
+                                                     "dfsph_neighbour_count")),
     "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
@@ -147,16 +148,20 @@ STAGES = {
                                                      "particle_residual", "dfsph_control", "particle_kappa",
                                                      "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_gradients",
                                                      "scratch_v")),
-    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "obstacle_box", "particle_vh",
-                                           "time_state")),
+    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "scratch_x", "obstacle_box",
+                                           "particle_vh", "time_state", "dfsph_control")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
                                                            "time_state")),
 }
 
-Stage = namedtuple("Stage", "name level indirect")  # level: the HistoPyramid level a reduce_cells builds, the
-#   solve of a DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), else 0; indirect: its work
-#   groups are read from dfsph_control when it runs (indirect_offset), as vkCmdDispatchIndirect does
-Stage.__new__.__defaults__ = (0, False)
+Stage = namedtuple("Stage", "name level indirect when")  # level: the HistoPyramid level a reduce_cells builds,
+#   the solve of a DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), compute_density's walk of
+#   reused lists (1), else 0; indirect: its work groups are read from dfsph_control when it runs (indirect_offset),
+#   as vkCmdDispatchIndirect does; when: with reused lists (spec.LIST_SKIN), BUILD for a stage that runs only at a
+#   build of the lists, REUSE only between builds, as dfsph_control[CONTROL_REBUILD] says when it runs (on Vulkan
+#   by conditional rendering), else ALWAYS
+ALWAYS, BUILD, REUSE = 0, 1, 2
+Stage.__new__.__defaults__ = (0, False, ALWAYS)
 
 
 def neighbour_stages(cell_total):
@@ -174,6 +179,10 @@ def plan(scene):
     spec = scene.spec
     stages = neighbour_stages(int(np.prod(scene.grid_dim))) if spec.GRID else []
     stages += [Stage("compute_density")]
+    # lists reused between builds (physics.list_skin): the sort and the scan only at a build, else the walk
+    # (compute_density at level 1); compute_forces clears the request that integrate sets (cells.glsl)
+    if spec.LIST_SKIN:
+        stages = [s._replace(when=BUILD) for s in stages] + [Stage("compute_density", 1, when=REUSE)]
     stages += [Stage("integrate_density")] if spec.CONTINUITY else []  # the density is state (continuity)
     # DFSPH (physics.pressure_solver = "dfsph"): the factor and the divergence-free solve before the forces,
     # the constant-density solve once the step's dt is known (dfsph.glsl)
@@ -242,6 +251,7 @@ def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gra
         state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
+    state["dfsph_control"][CONTROL_REBUILD] = 1  # (reused lists, spec.LIST_SKIN: the first step builds them)
     if len(obstacles) > MAX_OBSTACLES:
         raise ValueError(f"{len(obstacles)} obstacles: the obstacle_box buffer holds at most {MAX_OBSTACLES}")
     wall_lo, wall_hi = params[0]["box_min"], params[0]["box_max"]
@@ -386,7 +396,7 @@ class NumbaBackend:
         self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
         self._launch = [(self._launcher(s.name), self._groups(s), stage_params(params, s),
-                         [self.state[k] for k in STAGES[s.name][2]]) for s in stages]
+                         [self.state[k] for k in STAGES[s.name][2]], s.when) for s in stages]
 
     def _launcher(self, name):
         launch = STAGES[name][0](self.spec, self.real)
@@ -401,13 +411,17 @@ class NumbaBackend:
             return -1 - indirect_offset(stage)
         return group_count(dispatch_size(stage, self.params), self.local_size)
 
-    def _launch_groups(self, groups):
+    def _launch_groups(self, groups, when=ALWAYS):
+        """A launch's work groups now: none where the stage's `when` does not hold (reused lists: a build or not,
+        as dfsph_control[CONTROL_REBUILD] says)."""
+        if when != ALWAYS and (self.state["dfsph_control"][CONTROL_REBUILD] != 0) != (when == BUILD):
+            return 0
         return groups if groups >= 0 else int(self.state["dfsph_control"][-1 - groups])
 
     def warm_up(self, after_each=None):
         """Compile every stage of the plan without running it (a launch of no work groups: numba
         compiles a mirror on its first call), calling `after_each()` after each."""
-        for launch, _, params, buffers in self._launch:
+        for launch, _, params, buffers, _ in self._launch:
             launch(0, self.local_size, params, *buffers)
             if after_each is not None:
                 after_each()
@@ -415,22 +429,22 @@ class NumbaBackend:
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
         launch = STAGES[stage.name][0](self.spec, self.real)
-        launch(self._launch_groups(self._groups(stage)), self.local_size, stage_params(self.params, stage),
+        launch(self._launch_groups(self._groups(stage), stage.when), self.local_size, stage_params(self.params, stage),
                *(self.state[k] for k in STAGES[stage.name][2]))
 
     def step(self, count=1):
         if self.profile is not None:
             return self._profiled_step(count)
         for _ in range(count):
-            for launch, groups, params, buffers in self._launch:
-                n_groups = self._launch_groups(groups)
+            for launch, groups, params, buffers, when in self._launch:
+                n_groups = self._launch_groups(groups, when)
                 if n_groups:  # (a launch of no work groups does nothing: skipped, as numba's call costs)
                     launch(n_groups, self.local_size, params, *buffers)
 
     def _profiled_step(self, count):
         for _ in range(count):
-            for stage, (launch, groups, params, buffers) in zip(self.stages, self._launch):
-                n_groups = self._launch_groups(groups)
+            for stage, (launch, groups, params, buffers, when) in zip(self.stages, self._launch):
+                n_groups = self._launch_groups(groups, when)
                 if n_groups:  # (as step: a launch of no work groups is skipped)
                     start = time.perf_counter()
                     launch(n_groups, self.local_size, params, *buffers)
@@ -485,6 +499,13 @@ class VulkanBackend:
         if before_allocating is not None:
             before_allocating(self.ctx)
         self.params, self.stages, self.steps_per_submit, self.precision = params, stages, steps_per_submit, precision
+        if any(s.when != ALWAYS for s in stages) and not self.ctx.conditional_rendering:
+            from sphcore.vk_runner import VulkanError
+            name = self.ctx.device_name
+            self.ctx.close()
+            raise VulkanError(f"{name} has no VK_EXT_conditional_rendering, which reused neighbour lists "
+                              "(physics.list_skin) need to skip the sort between builds: set physics.list_skin = 0, "
+                              "or run on the numba backend")
         self.profile = profile  # a sphcore.profile.Profile: a GPU timestamp after every dispatch of step()
         if profile is not None:
             profile.device = self.ctx.device_name
@@ -542,8 +563,9 @@ class VulkanBackend:
                     rec.dispatch_indirect(self.pipelines[stage.name], stage_params(self.params, stage), control,
                                           4 * indirect_offset(stage), predicate=running)
                 else:
+                    when = (control, 4 * CONTROL_REBUILD, stage.when == REUSE) if stage.when != ALWAYS else running
                     rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
-                                 dispatch_size(stage, self.params), predicate=running)
+                                 dispatch_size(stage, self.params), predicate=when)
                 rec.barrier()
                 if timed:
                     rec.timestamp(rec.timer, 1 + k)

@@ -123,7 +123,8 @@ def pyramid_levels(cell_total):
 
 def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
                     gravity, box_min, box_max, grid_dim=(1, 1, 1), kernel="mueller", density_diffusion="none",
-                    diffusion_delta=0.1, gravity_on=True, viscosity_model="laminar", alpha=0.0, cfl_number=0.0):
+                    diffusion_delta=0.1, gravity_on=True, viscosity_model="laminar", alpha=0.0, cfl_number=0.0,
+                    reach=None):
     """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
     `dim` components are padded with zeros to three. `kernel`: physics.kernel; `density_diffusion`
     ("none" | "molteni" | "fourtakas") with coefficient `diffusion_delta` (fluid.density_diffusion);
@@ -149,7 +150,7 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     p["stiffness"] = rest_density * stiffness / 7.0 if tait else stiffness
     p["dt"] = dt
     p["restitution"] = restitution
-    p["inv_cell"] = 1.0 / (h * CELL_PADDING)
+    p["inv_cell"] = 1.0 / ((reach or h) * CELL_PADDING)  # cells of the search's reach: h (or a reused list's)
     p["gravity"] = pad(gravity)
     p["box_min"] = pad(box_min)
     p["box_max"] = pad(box_max)

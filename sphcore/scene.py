@@ -125,6 +125,9 @@ SCHEMA = {
                                "Koschier 2015, 2017), a divergence-free and a constant-density solve each step to "
                                "fluid.max_divergence_error and fluid.max_density_error, dt from time.cfl_number on the "
                                "particle speed", "state_equation|dfsph"),
+        "list_skin": Key(0.0, "h", 0.0, 1.0, "the state equation's neighbour lists reused between builds: a build "
+                         "sorts the particles and lists every pair within (1 + list_skin) h, and the lists serve until a "
+                         "particle has moved list_skin h / 2.05 (rounded to 0.001 h); 0: a sort and a list every step"),
     },
     "domain": {
         "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls (open: origin of the hashed grid)", "vec"),
@@ -402,6 +405,16 @@ class Scene:
                                      "velocity")):
                 if self[key] == value:
                     raise SceneError(f'physics.pressure_solver = "dfsph" does not go with {key} = "{value}" ({why})')
+        if self["physics.list_skin"] > 0:
+            for key, value, why in (("physics.pressure_solver", "dfsph", "its solves walk lists built every step"),
+                                    ("physics.density", "continuity", "the reused lists serve summation density"),
+                                    ("physics.neighbour_search", "all_pairs", "the lists are built from the grid")):
+                if self[key] == value:
+                    raise SceneError(f'physics.list_skin = {self["physics.list_skin"]:g} does not go with {key} = '
+                                     f'"{value}" ({why}); set physics.list_skin = 0')
+            if self["domain.obstacles"]:
+                raise SceneError(f'physics.list_skin = {self["physics.list_skin"]:g} does not go with domain.obstacles '
+                                 "(an obstacle's images are chosen at every step); set physics.list_skin = 0")
         if self["physics.density_diffusion"] != "none" and self["physics.density"] != "continuity":
             raise SceneError(f"physics.density_diffusion = {self['physics.density_diffusion']!r} needs "
                              f'physics.density = "continuity" (got {self["physics.density"]!r}): a summation '
@@ -423,6 +436,11 @@ class Scene:
             if hi[axis] - lo[axis] <= 2 * self.h:
                 raise SceneError(f"domain.box_max - domain.box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
                                  f"2 h = {2 * self.h:g} m (h = fluid.spacing * fluid.smoothing_ratio)")
+            skin = self.skin_thousandths / 1000
+            if skin > 0 and self["domain.boundary"] == "walls" and hi[axis] - lo[axis] <= (2 + 3 * skin) * self.h:
+                raise SceneError(f"domain.box_max - domain.box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
+                                 f"(2 + 3 physics.list_skin) h = {(2 + 3 * skin) * self.h:g} m with reused lists (a "
+                                 "particle's walls are those of where it was at the lists' build)")
         for i, block in enumerate(self["fluid.blocks"]):
             if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(dim)):
                 raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box domain.box_min .. domain.box_max = "
@@ -437,7 +455,7 @@ class Scene:
                              f"exceeds {MAX_PARTICLES}; raise the spacing")
         cells = int(np.prod(self.grid_dim))
         if cells > MAX_CELLS:
-            raise SceneError(f"domain: the neighbour grid would need {cells} cells of size h = {self.h:g} m "
+            raise SceneError(f"domain: the neighbour grid would need {cells} cells of size {self.cell_size:g} m "
                              f"(at most {MAX_CELLS}); shrink the box (domain.box_min, domain.box_max) or raise "
                              "fluid.spacing")
         self._check_numbers(int(count))
@@ -495,13 +513,29 @@ class Scene:
                              'physics.precision = "float64"')
 
     @property
+    def skin_thousandths(self):
+        """physics.list_skin in thousandths of h (the shaders' LIST_SKIN)."""
+        return round(1000 * self["physics.list_skin"])
+
+    @property
+    def reach(self):
+        """How far the neighbour search reaches: h, or with reused lists a build's, (1 + list_skin) h."""
+        k = self.skin_thousandths
+        return self.h * (1000 + k) / 1000 if k else self.h
+
+    @property
+    def cell_size(self):
+        """The neighbour grid's cells: the search's reach, padded (cells.glsl)."""
+        return self.reach * CELL_PADDING
+
+    @property
     def grid_dim(self):
-        """Cells per axis (x, y, z) of the neighbour grid: the box in cells of size h (padded);
+        """Cells per axis (x, y, z) of the neighbour grid: the box in cells of cell_size;
         an open domain's hash period is at least 3 cells, so the 3^dim cells searched around
         a particle are distinct. (1, 1, 1) for all-pairs neighbours."""
         if self["physics.neighbour_search"] == "all_pairs":
             return (1, 1, 1)
-        size = self.h * CELL_PADDING
+        size = self.cell_size
         lo, hi = self["domain.box_min"], self["domain.box_max"]
         dims = [max(1, math.ceil((hi[a] - lo[a]) / size)) for a in range(self.dim)] + [1] * (3 - self.dim)
         if self["domain.boundary"] == "open":
@@ -567,7 +601,7 @@ class Scene:
         within a fraction of a percent of rest, and the wall images fill a ball cut by the walls."""
         if self["fluid.max_neighbours"] > 0:
             return self["fluid.max_neighbours"]
-        r = self["fluid.smoothing_ratio"]
+        r = self["fluid.smoothing_ratio"] * (1000 + self.skin_thousandths) / 1000  # (reused lists reach further)
         return math.ceil(2 * (math.pi * r * r if self.dim == 2 else 4 / 3 * math.pi * r ** 3))
 
     @property
@@ -583,7 +617,7 @@ class Scene:
                     VISCOSITY_MODEL=("laminar", "artificial").index(physics["viscosity_model"]),
                     NO_SLIP=self["domain.wall_model"] == "no_slip", VERLET=self["time.integrator"] == "verlet",
                     ADAPTIVE_DT=self.adaptive_dt, DFSPH=self.dfsph,
-                    MAX_NEIGHBOURS=self.max_neighbours if self.dfsph else 0)
+                    MAX_NEIGHBOURS=self.max_neighbours if self.dfsph else 0, LIST_SKIN=self.skin_thousandths)
 
     def spec_for(self, backend):
         """The spec a run on `backend` compiles: the scene's, and with the state equation also neighbour
@@ -605,6 +639,10 @@ class Scene:
         if spec.DFSPH and particle_count(self) * list_width(spec.MAX_NEIGHBOURS) <= GRADIENT_SLOTS.get(backend, 0):
             spec = spec._replace(GRADIENTS=True)  # (dfsph_factor stores what the sweeps would compute)
         listed = spec.MAX_NEIGHBOURS > 0
+        if spec.LIST_SKIN and not listed:
+            raise SceneError(f"physics.list_skin = {self['physics.list_skin']:g}: the {backend} backend holds at most "
+                             f"{LIST_WORDS.get(backend, 0)} list words, and {particle_count(self)} particles with "
+                             f"{list_width(self.max_neighbours)} slots each need more; set physics.list_skin = 0")
         return spec._replace(LIST_BY_PARTICLE=backend == "numba" and listed,
                              LIST_CHUNKS=backend == "vulkan" and listed and not spec.DFSPH)
 
@@ -620,7 +658,8 @@ class Scene:
             diffusion_delta=self["fluid.density_diffusion"], gravity_on=self["physics.gravity"],
             viscosity_model=self["physics.viscosity_model"], alpha=self["fluid.alpha"],
             cfl_number=(self["time.cfl_number"] / self["fluid.smoothing_ratio"] if self.dfsph
-                        else 0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0))
+                        else 0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0),
+            reach=self.reach)
 
     def to_json(self):
         return json.dumps(self.config, sort_keys=True)

@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sphcore.backends import PARTICLE_BUFFERS, empty_state, in_particle_order, make_backend, plan
+from sphcore.backends import PARTICLE_BUFFERS, REUSE, empty_state, in_particle_order, make_backend, plan
 from sphcore.scene import stable_dt
+from sphcore.sph.dfsph import CONTROL_BUILDS, CONTROL_REBUILD
 from sphcore.signals import Interrupted, Signals  # noqa: F401 (Interrupted: sphcore.simulation.Interrupted)
 
 
@@ -95,7 +96,7 @@ class Simulation:
         """Density and pressure of the current positions (a step without its forces and motion)."""
         for stage in self.stages:
             if stage.name not in ("compute_forces", "reduce_dt", "choose_dt", "integrate") and \
-                    not stage.name.startswith("dfsph_"):
+                    not stage.name.startswith("dfsph_") and stage.when != REUSE:
                 self.backend.run_stage(stage)
 
     @property
@@ -144,7 +145,17 @@ class Simulation:
         self._carried = {name: raw[name] for name in CARRIED}
         if self.energy_start is None:
             self.energy_start = sum(self.energy(state))
+        self._build_lists_next()
         return state
+
+    def _build_lists_next(self):
+        """Reused lists (physics.list_skin): the next step builds them. After every read of the state, so that a
+        run resumed from it (restore) steps on as the run that read it did: bitwise the same. (A replay, which
+        reads every step, builds every step: its sums run in another order than the run it replays.)"""
+        if self.spec.LIST_SKIN:
+            control = self.backend.read_buffer("dfsph_control")
+            control[CONTROL_REBUILD] = 1
+            self.backend.write_buffer("dfsph_control", control)
 
     def _replay(self):
         """Step again from the last good state, one step at a time, until a check fails (it raises)."""
@@ -219,6 +230,7 @@ class Simulation:
             self.backend.write_buffer(name, values)
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
+        self._build_lists_next()
         if self.scene.dfsph and "solver_log" in arrays:  # (a replay's restore keeps the rows it has)
             self.solver_log.rows = {int(r[0]): np.array(r, np.float64) for r in arrays["solver_log"]
                                     if 0 < r[0] <= self.step_count}
@@ -359,6 +371,8 @@ def final_arrays(sim, state):
     }
     for field in sim.params.dtype.names:
         arrays[f"param_{field}"] = np.asarray(sim.params[0][field])
+    if sim.spec.LIST_SKIN:  # reused lists: their builds since the start (the start's own included)
+        arrays["list_builds"] = np.int64(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS])
     if sim.scene.dfsph:  # DFSPH: each step's dt, time, iterations and final errors (sphcore.pressure_solver)
         from sphcore.pressure_solver import LOG_COLUMNS
         arrays["solver_log"] = sim.solver_log.array()

@@ -422,7 +422,7 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
     state["particle_x"][:, :3] = position
     cells = int(params[0]["cell_total"])
     # the colour field needs the positions' summation density, whatever density the scene integrates
-    spec = spec._replace(CONTINUITY=False, DENSITY_DIFFUSION=0, MAX_NEIGHBOURS=0)  # (and no neighbour lists)
+    spec = spec._replace(CONTINUITY=False, DENSITY_DIFFUSION=0, MAX_NEIGHBOURS=0, LIST_SKIN=0)  # (and no lists)
     sorter = make_backend(backend, params, state, neighbour_stages(cells) + [Stage("compute_density")], spec,
                           **({"device": device} if backend == "vulkan" else {}))
     try:

@@ -33,17 +33,29 @@ int cell_index(ivec3 c) {
 }
 
 // Wall images: bit a of the result is set where the wall nearer to x on axis a (returned in
-// `wall`) is within h, so that x also sees every particle mirrored across it (walls only; z in 3D).
-uint near_walls(real3 x, out real3 wall) {
-    wall = real3(x.x - P.box_min.x < P.h ? P.box_min.x : P.box_max.x,
-                 x.y - P.box_min.y < P.h ? P.box_min.y : P.box_max.y,
-                 x.z - P.box_min.z < P.h ? P.box_min.z : P.box_max.z);
+// `wall`) is within `reach`, so that x also sees every particle mirrored across it (walls only; z in 3D).
+uint near_walls_within(real3 x, real reach, out real3 wall) {
+    wall = real3(x.x - P.box_min.x < reach ? P.box_min.x : P.box_max.x,
+                 x.y - P.box_min.y < reach ? P.box_min.y : P.box_max.y,
+                 x.z - P.box_min.z < reach ? P.box_min.z : P.box_max.z);
     uint mirrored = 0u;
-    if (WALLS && abs(x.x - wall.x) < P.h) mirrored |= 1u;
-    if (WALLS && abs(x.y - wall.y) < P.h) mirrored |= 2u;
-    if (WALLS && DIM == 3u && abs(x.z - wall.z) < P.h) mirrored |= 4u;
+    if (WALLS && abs(x.x - wall.x) < reach) mirrored |= 1u;
+    if (WALLS && abs(x.y - wall.y) < reach) mirrored |= 2u;
+    if (WALLS && DIM == 3u && abs(x.z - wall.z) < reach) mirrored |= 4u;
     return mirrored;
 }
+
+// The walls within h.
+uint near_walls(real3 x, out real3 wall) { return near_walls_within(x, real(P.h), wall); }
+
+// Lists reused between builds (LIST_SKIN > 0, physics.list_skin = s): a build lists every particle and image
+// within list_reach() = (1 + s) h (the cells are that size then: Scene.grid_dim), and the lists serve until a
+// particle has moved more than moved_limit2()'s root, s h / 2.05, from where it was at the build (integrate.comp
+// asks for the next build): a pair within h now was within h + s h / 1.025 at the build, so in the list. A
+// particle's walls and the cells of a scan are those of where it was at the build (scratch_x), so that the
+// images and cells of its list do not change while the list serves.
+real list_reach() { return real(P.h) * (real(1000u + LIST_SKIN) / real(1000.0)); }
+real moved_limit2() { return real(P.h2) * (real(LIST_SKIN * LIST_SKIN) / real(4202500.0)); }
 
 // Point x mirrored across the walls of the axes whose bits are set in `image`.
 real3 reflected(real3 x, real3 wall, uint image) {

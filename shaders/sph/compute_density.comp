@@ -5,7 +5,9 @@
 // density (CONTINUITY): rho_i is state, integrated by integrate.comp from the d rho/dt written here
 // (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With neighbour
 // lists (MAX_NEIGHBOURS > 0: DFSPH, and the state equation where they fit, Scene.spec_for) the scan also writes the
-// particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves.
+// particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists
+// reused between builds (LIST_SKIN, cells.glsl: list_reach): a build (P.level 0) lists out to list_reach and keeps
+// where each particle was (scratch_x); a step between builds (P.level 1) walks the lists instead of the cells.
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -28,12 +30,17 @@ layout(std430, binding = 3) buffer ParticleRho { real particle_rho[]; };  // wri
 layout(std430, binding = 4) writeonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 11) buffer ScratchX { real4 scratch_x[]; };  // LIST_SKIN: x at the list's build
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
 layout(std430, binding = 17) writeonly buffer ParticleDrho { real particle_drho[]; };
 layout(std430, binding = 29) buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 29) buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks: dfsph.glsl)
-layout(std430, binding = 30) writeonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };  // LIST_SKIN: CONTROL_BUILDS
+layout(std430, binding = 30) buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };  // (unread: named by
+                                                                                           // neighbour_list.glsl)
+#include "neighbour_list.glsl"
 
 // Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
 uint neighbour_hash(uint id, uint image) {
@@ -49,7 +56,7 @@ uint neighbour_hash(uint id, uint image) {
 // Every candidate goes into the list's next slot, which only one within h keeps, self included; the kernel is
 // then summed over the list in the scan's order and self taken out of it (listed_sum): the same bits as the scan
 // with the branch. Before a cell range that could fill the list, it is summed, and the scan goes on with the branch.
-const bool LIST_FIRST = BRANCH_FREE_SCAN && MAX_NEIGHBOURS > 0u && !CONTINUITY && !NEIGHBOUR_STATS;
+const bool LIST_FIRST = BRANCH_FREE_SCAN && MAX_NEIGHBOURS > 0u && !CONTINUITY && !NEIGHBOUR_STATS && LIST_SKIN == 0u;
 // A list in chunks (LIST_CHUNKS, dfsph.glsl: list_slot) is written a chunk of 4 entries at a time, gathered in
 // `chunk`: one 16-byte store where the GPU paid for four scattered ones (a list-first scan writes entry by entry).
 const bool CHUNKED = LIST_CHUNKS && !LIST_BY_PARTICLE && !LIST_FIRST;
@@ -88,9 +95,12 @@ void main() {
     // [3] wall images: within h of a wall, particle i also sees every particle mirrored across
     //     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
     //     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
-    //     takes the place of its axis's wall where nearer (obstacles.glsl)
+    //     takes the place of its axis's wall where nearer (obstacles.glsl). Reused lists (LIST_SKIN): the walls
+    //     within list_reach of where i was at the list's build (this step's position at a build, P.level 0)
+    bool walk = LIST_SKIN > 0u && P.level == 1u;
+    real3 x_built = walk ? scratch_x[i].xyz : xi;
     real3 wall;
-    uint mirrored = near_walls(xi, wall);
+    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
     real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] sum kernel_w over every particle and image within h, self included (with
@@ -99,7 +109,8 @@ void main() {
     //     is within h of xi's own image xm, so the cells searched are those around xm.
     //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
     //     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
-    //     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4)
+    //     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4). A build of
+    //     reused lists lists the others within list_reach
     real sum_w = real(0.0);
     real sum_div = real(0.0);
     real sum_diffusion = real(0.0);
@@ -108,14 +119,34 @@ void main() {
     uint count = 0u;
     bool listing = LIST_FIRST;
     uvec4 chunk = uvec4(0u);
+    real reach2 = list_reach() * list_reach();
+    bool scanning = true;
+    if (walk) {  // [5] a reused list: self, and the listed particles and images now within h, in the list's order;
+                 //     a list that overflowed at its build scans the cells of the build around x_built instead
+        count = dfsph_neighbour_count[i];
+        scanning = count > MAX_NEIGHBOURS;
+    }
+    if (!scanning) {
+        sum_w = kernel_w(real(0.0));
+        for (uint slot = 0u; slot < count; ++slot) {
+            uint pair = listed_word(i, slot, chunk);
+            uint j = pair & NEIGHBOUR_MASK;
+            uint image = pair >> IMAGE_SHIFT;
+            real3 xk = particle_x[j].xyz;
+            if (image != 0u) xk = reflected(xk, wall, image);
+            real3 r = xi - xk;
+            real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+            if (r2 < P.h2) sum_w += kernel_w(r2);
+        }
+    }
     for (uint image = 0u; image < 8u; ++image) {
-        if ((image & ~mirrored) != 0u) continue;
+        if (!scanning || (image & ~mirrored) != 0u) continue;
         bool fx = (image & 1u) != 0u;
         bool fy = (image & 2u) != 0u;
         bool fz = (image & 4u) != 0u;
-        real3 xm = reflected(xi, wall, image);
+        real3 xm = reflected(x_built, wall, image);
         ivec3 base = cell_of(xm);
-        // [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
         for (uint k = 0u; k < range_count(); ++k) {
             uint start = 0u;
             uint end = P.n;
@@ -141,13 +172,14 @@ void main() {
                     count += uint(r2 < P.h2);
                     continue;
                 }
-                if (r2 < P.h2) {
-                    if (!CONTINUITY) sum_w += kernel_w(r2);
-                    if (NEIGHBOUR_STATS) {
+                bool within = r2 < P.h2;
+                if (within || (LIST_SKIN > 0u && !walk && r2 < reach2)) {
+                    if (!CONTINUITY && within) sum_w += kernel_w(r2);
+                    if (NEIGHBOUR_STATS && within) {
                         found += 1u;
                         fingerprint += neighbour_hash(particle_id[j], image);
                     }
-                    if (MAX_NEIGHBOURS > 0u && (j != i || image != 0u)) {
+                    if (MAX_NEIGHBOURS > 0u && !walk && (j != i || image != 0u)) {
                         if (count < MAX_NEIGHBOURS) {
                             uint pair = j | (image << IMAGE_SHIFT);
                             if (CHUNKED) {
@@ -160,8 +192,8 @@ void main() {
                         count += 1u;
                     }
                 }
-                if (!CONTINUITY || r2 >= P.h2 || (j == i && image == 0u)) continue;
-                // [6] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
+                if (!CONTINUITY || !within || (j == i && image == 0u)) continue;
+                // [7] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
                 //     is mirrored on its flipped axes
                 real rlen = sqrt(r2);
                 real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
@@ -170,9 +202,9 @@ void main() {
                 real vk_y = fy ? -vj.y : vj.y;
                 real vk_z = fz ? -vj.z : vj.z;
                 real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
-                // [7] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
+                // [8] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
                 sum_div += pair_gradient(r2, rlen, image) * v_r;
-                // [8] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
+                // [9] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
                 //     image carries its particle's density, so its hydrostatic difference is its particle's
                 if (DENSITY_DIFFUSION > 0u) sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
             }
@@ -180,8 +212,8 @@ void main() {
     }
     if (listing) count = listed_sum(i, xi, wall, count, sum_w);
     uint kept = min(count, MAX_NEIGHBOURS);
-    if (CHUNKED && (kept & 3u) != 0u) dfsph_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
-    // [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+    if (CHUNKED && !walk && (kept & 3u) != 0u) dfsph_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
+    // [10] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
     //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;
     real drho = real(0.0);
@@ -190,13 +222,16 @@ void main() {
         drho = -P.pressure_coef * sum_div;
         if (DENSITY_DIFFUSION > 0u) drho += P.diffusion_coef * sum_diffusion;
     }
-    // [10] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+    // [11] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
     //     density only)
     real p = equation_of_state(rho);
-    // [11] store
+    // [12] store
     if (!CONTINUITY) particle_rho[i] = rho;
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;
     if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
-    if (MAX_NEIGHBOURS > 0u) dfsph_neighbour_count[i] = count;  // (longer than its slots: compute_forces scans, DFSPH stops)
+    if (MAX_NEIGHBOURS > 0u && !walk) dfsph_neighbour_count[i] = count;  // (longer than its slots: compute_forces
+                                                                         // scans, DFSPH stops)
+    if (LIST_SKIN > 0u && !walk) scratch_x[i] = particle_x[i];  // (where the list was built: integrate, the walks)
+    if (LIST_SKIN > 0u && !walk && i == 0u) dfsph_control[CONTROL_BUILDS] += 1u;
 }

@@ -4,7 +4,8 @@
 // tension by cohesion (Becker & Teschner 2007) and gravity, one invocation per particle.
 // Neighbours, wall and obstacle images as in compute_density; with neighbour lists (DFSPH, and the state
 // equation where they fit: Scene.spec_for), the step's list (compute_density: the same pairs, in the same order,
-// so the same bits). Each optional term is compiled out by its specialization constant.
+// so the same bits; reused lists, LIST_SKIN: the pairs of the list now within h). Each optional term is compiled
+// out by its specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -28,6 +29,8 @@ layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; }
 layout(std430, binding = 4) readonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  // LIST_SKIN: x at the list's build
+layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };  // LIST_SKIN: CONTROL_REBUILD
 layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
 layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
@@ -46,9 +49,11 @@ void main() {
     real pi = particle_p[i];
     real pi_rho2 = pi / (rhoi * rhoi);
     // [3] wall and obstacle images, as in compute_density; an image's normal velocity is reversed
-    //     (free slip); `inward` points from each axis's mirror plane into the fluid
+    //     (free slip); `inward` points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN):
+    //     the walls and cells of where i was at the list's build, as compute_density's
+    real3 x_built = LIST_SKIN > 0u ? scratch_x[i].xyz : xi;
     real3 wall;
-    uint mirrored = near_walls(xi, wall);
+    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
     real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] sums over every other particle and every image within h
@@ -69,6 +74,7 @@ void main() {
             real r2;
             real rlen;
             real3 r_hat = listed_pair(i, slot, chunk, xi, wall, inward, j, image, r, r2, rlen);
+            if (LIST_SKIN > 0u && r2 >= P.h2) continue;  // (a reused list holds pairs out to list_reach)
             real grad = pair_gradient(r2, rlen, image);
             real rhoj = particle_rho[j];
             if (!DFSPH) {
@@ -84,7 +90,7 @@ void main() {
     }
     for (uint image = 0u; image < 8u; ++image) {
         if (listed || (image & ~mirrored) != 0u) continue;
-        real3 xm = reflected(xi, wall, image);
+        real3 xm = reflected(x_built, wall, image);
         ivec3 base = cell_of(xm);
         // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
         for (uint k = 0u; k < range_count(); ++k) {
@@ -139,6 +145,8 @@ void main() {
     if (VISCOSITY) a += viscous_acceleration(f_viscosity, rhoi);
     if (SURFACE_TENSION) a += P.cohesion_coef * f_cohesion;
     if (GRAVITY) a += P.gravity;
-    // [12] store
+    // [12] store; reused lists: the next build is integrate's to ask for (every dispatch that reads the request
+    //      has run: backends.plan)
     particle_a[i] = real4(a, 0.0);
+    if (LIST_SKIN > 0u && i == 0u) dfsph_control[CONTROL_REBUILD] = 0u;
 }

@@ -39,3 +39,6 @@ layout(constant_id = 24) const bool BRANCH_FREE_SCAN = false; // compute_density
                                                           // the distance (the numba backend times both scans)
 layout(constant_id = 25) const bool LIST_CHUNKS = false;  // slot-major lists in chunks of 4 slots (Scene.spec_for:
                                                           // Vulkan's state equation; dfsph.glsl: list_slot)
+layout(constant_id = 26) const uint LIST_SKIN = 0;        // the state equation's lists reused between builds: their
+                                                          // skin in thousandths of h (physics.list_skin; 0: a list
+                                                          // every step; cells.glsl: list_reach)

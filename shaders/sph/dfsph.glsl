@@ -75,6 +75,10 @@ const uint CONTROL_WINDOW = 13u;        // [CONTROL_WINDOW + solve]: the iterati
                                         // of the solve (0: the whole budget, no window)
 const uint CONTROL_DISPATCH = 16u;      // [dispatch_base(solve)]: the solve's indirect dispatch arguments,
                                         //   (x, y, z) work groups of its dfsph_velocity and dfsph_residual
+const uint CONTROL_REBUILD = 22u;       // the state equation's reused lists (LIST_SKIN; no DFSPH, so its words are
+                                        // free): 1 where the next step builds the lists (and sorts), 0 where it
+                                        // walks the last ones; set by integrate, cleared by compute_forces
+const uint CONTROL_BUILDS = 23u;        // the builds so far (compute_density)
 const uint CONTROL_SIZE = 32u;
 
 const uint IMAGE_SHIFT = 29u;           // dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)

@@ -1,7 +1,8 @@
 #version 460
 // Time step (integrators.glsl: symplectic Euler or the kick-drift-kick Verlet leapfrog), box walls and
 // obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt.comp wrote
-// into time_state on the device this step (no readback).
+// into time_state on the device this step (no readback). Reused lists (LIST_SKIN): a particle that has moved
+// too far from where it was at the lists' build asks for the next build (cells.glsl: moved_limit2).
 // Mirror: sphcore/sph/integrate.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -9,13 +10,17 @@ layout(local_size_x_id = 0) in;
 #include "constants.glsl"
 #include "real.glsl"
 #include "integrators.glsl"
+#include "cells.glsl"
+#include "dfsph.glsl"
 
 layout(std430, binding = 0) buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  // LIST_SKIN: x at the list's build
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 layout(std430, binding = 19) buffer ParticleVh { real4 particle_vh[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
+layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };  // LIST_SKIN: CONTROL_REBUILD
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
@@ -65,4 +70,10 @@ void main() {
     particle_x[i] = real4(x, 0.0);
     particle_v[i] = real4(stored_velocity(v, a, dt), 0.0);
     if (VERLET) particle_vh[i] = real4(v, 0.0);
+    // [7] reused lists: the next step builds them where this particle has moved too far since the last build
+    //     (every particle that has writes the same 1)
+    if (LIST_SKIN > 0u) {
+        real3 moved = x - scratch_x[i].xyz;
+        if (moved.x * moved.x + moved.y * moved.y + moved.z * moved.z > moved_limit2()) dfsph_control[CONTROL_REBUILD] = 1u;
+    }
 }

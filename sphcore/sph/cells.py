@@ -13,6 +13,41 @@ CELL_LIMIT = 1 << 24  # |cell coordinate| beyond this: outside the hashed range
 
 
 @lru_cache(maxsize=None)
+def skin(spec, real=np.float32):
+    """near_walls_within, list_reach, moved_limit2 (cells.glsl; the lists' skin, LIST_SKIN)."""
+    DIM, WALLS, LIST_SKIN = spec.DIM, spec.WALLS, spec.LIST_SKIN
+
+    @njit
+    def near_walls_within(P, x_x, x_y, x_z, reach):
+        """Wall images: (mirrored, wall): bit a of mirrored is set where the wall nearer to x on
+        axis a is within `reach`, so that x also sees every particle mirrored across it."""
+        wall_x = P.box_min[0] if x_x - P.box_min[0] < reach else P.box_max[0]
+        wall_y = P.box_min[1] if x_y - P.box_min[1] < reach else P.box_max[1]
+        wall_z = P.box_min[2] if x_z - P.box_min[2] < reach else P.box_max[2]
+        mirrored = 0
+        if WALLS and abs(x_x - wall_x) < reach:
+            mirrored |= 1
+        if WALLS and abs(x_y - wall_y) < reach:
+            mirrored |= 2
+        if WALLS and DIM == 3 and abs(x_z - wall_z) < reach:
+            mirrored |= 4
+        return mirrored, wall_x, wall_y, wall_z
+
+    # Lists reused between builds (LIST_SKIN > 0, physics.list_skin = s): a build lists every particle and image
+    # within list_reach() = (1 + s) h, and the lists serve until a particle has moved more than moved_limit2()'s
+    # root, s h / 2.05, from where it was at the build (cells.glsl says why that suffices).
+    @njit
+    def list_reach(P):
+        return real(P.h) * (real(1000 + LIST_SKIN) / real(1000.0))
+
+    @njit
+    def moved_limit2(P):
+        return real(P.h2) * (real(LIST_SKIN * LIST_SKIN) / real(4202500.0))
+
+    return near_walls_within, list_reach, moved_limit2
+
+
+@lru_cache(maxsize=None)
 def cells(spec, real=np.float32):
     DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
 
@@ -43,21 +78,12 @@ def cells(spec, real=np.float32):
             c_z = (c_z + d_z * (CELL_LIMIT // d_z + 2)) % d_z
         return (c_z * d_y + c_y) * d_x + c_x
 
+    near_walls_within = skin(spec, real)[0]
+
     @njit
     def near_walls(P, x_x, x_y, x_z):
-        """Wall images: (mirrored, wall): bit a of mirrored is set where the wall nearer to x on
-        axis a is within h, so that x also sees every particle mirrored across it."""
-        wall_x = P.box_min[0] if x_x - P.box_min[0] < P.h else P.box_max[0]
-        wall_y = P.box_min[1] if x_y - P.box_min[1] < P.h else P.box_max[1]
-        wall_z = P.box_min[2] if x_z - P.box_min[2] < P.h else P.box_max[2]
-        mirrored = 0
-        if WALLS and abs(x_x - wall_x) < P.h:
-            mirrored |= 1
-        if WALLS and abs(x_y - wall_y) < P.h:
-            mirrored |= 2
-        if WALLS and DIM == 3 and abs(x_z - wall_z) < P.h:
-            mirrored |= 4
-        return mirrored, wall_x, wall_y, wall_z
+        """The walls within h."""
+        return near_walls_within(P, x_x, x_y, x_z, real(P.h))
 
     @njit
     def reflected(x_x, x_y, x_z, wall_x, wall_y, wall_z, image):

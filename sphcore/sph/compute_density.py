@@ -3,7 +3,9 @@ pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation
 The kernel is kernels.glsl's (KERNEL). Summation density, or with CONTINUITY the rate d rho/dt
 (particle_drho) of the density that integrate.comp integrates, with density diffusion
 (DENSITY_DIFFUSION). With neighbour lists (MAX_NEIGHBOURS > 0) the scan also writes each particle's
-list (dfsph.py), which compute_forces walks, and under DFSPH dfsph_factor and the solves.
+list (dfsph.py), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists reused
+between builds (LIST_SKIN, cells.glsl: list_reach): a build (P.level 0) lists out to list_reach and keeps where
+each particle was (scratch_x); a step between builds (P.level 1) walks the lists instead of the cells.
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -13,11 +15,12 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.cells import cells
+from sphcore.sph.cells import cells, skin
 from sphcore.sph.density_diffusion import density_diffusion
-from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots, store_chunk, with_lane
+from sphcore.sph.dfsph import CONTROL_BUILDS, IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots, store_chunk, with_lane
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
+from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
 from sphcore.workgroups import launcher
@@ -36,13 +39,16 @@ def neighbour_hash(id, image):
 
 def can_list_first(spec):
     """Whether the spec's scan writes lists and sums the density, where BRANCH_FREE_SCAN lists first."""
-    return spec.MAX_NEIGHBOURS > 0 and not spec.CONTINUITY and not spec.NEIGHBOUR_STATS
+    return spec.MAX_NEIGHBOURS > 0 and not spec.CONTINUITY and not spec.NEIGHBOUR_STATS and spec.LIST_SKIN == 0
 
 
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
     DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_walls_within, list_reach = skin(spec, real)[:2]
+    listed_word = neighbour_list(spec, real)[2]
+    LIST_SKIN = spec.LIST_SKIN
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
@@ -86,8 +92,8 @@ def compute_density(spec, real=np.float32):
 
     @njit
     def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
-                             particle_id, particle_neighbours, obstacle_box, particle_drho, dfsph_neighbours,
-                             dfsph_neighbour_count):
+                             scratch_x, particle_id, particle_neighbours, obstacle_box, particle_drho, dfsph_control,
+                             dfsph_neighbours, dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -108,8 +114,16 @@ def compute_density(spec, real=np.float32):
         # [3] wall images: within h of a wall, particle i also sees every particle mirrored across
         #     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
         #     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
-        #     takes the place of its axis's wall where nearer (obstacles.glsl)
-        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        #     takes the place of its axis's wall where nearer (obstacles.glsl). Reused lists (LIST_SKIN): the walls
+        #     within list_reach of where i was at the list's build (this step's position at a build, P.level 0)
+        walk = LIST_SKIN > 0 and P.level == 1
+        x_built_x = scratch_x[i, 0] if walk else xi_x
+        x_built_y = scratch_x[i, 1] if walk else xi_y
+        x_built_z = scratch_x[i, 2] if walk else xi_z
+        if LIST_SKIN > 0:
+            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
+        else:
+            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] sum kernel_w over every particle and image within h, self included (with
@@ -118,7 +132,8 @@ def compute_density(spec, real=np.float32):
         #     is within h of xi's own image xm, so the cells searched are those around xm.
         #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
         #     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
-        #     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4)
+        #     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4). A build of
+        #     reused lists lists the others within list_reach
         sum_w = real(0.0)
         sum_div = real(0.0)
         sum_diffusion = real(0.0)
@@ -127,15 +142,36 @@ def compute_density(spec, real=np.float32):
         count = 0
         listing = LIST_FIRST
         chunk = (0, 0, 0, 0)
+        reach2 = list_reach(P) * list_reach(P)
+        scanning = True
+        if walk:  # [5] a reused list: self, and the listed particles and images now within h, in the list's order;
+            #         a list that overflowed at its build scans the cells of the build around x_built instead
+            count = int(dfsph_neighbour_count[i])
+            scanning = count > MAX_NEIGHBOURS
+        if not scanning:
+            sum_w = kernel_w(P, real(0.0))
+            for slot in range(count):
+                pair, chunk = listed_word(P, dfsph_neighbours, i, slot, chunk)
+                j = pair & NEIGHBOUR_MASK
+                image = pair >> IMAGE_SHIFT
+                xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
+                if image != 0:
+                    xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
+                r_x = xi_x - xk
+                r_y = xi_y - yk
+                r_z = xi_z - zk
+                r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                if r2 < P.h2:
+                    sum_w += kernel_w(P, r2)
         for image in range(8):
-            if (image & ~mirrored) != 0:
+            if not scanning or (image & ~mirrored) != 0:
                 continue
             fx = (image & 1) != 0
             fy = (image & 2) != 0
             fz = (image & 4) != 0
-            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
+            xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [5] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
             for k in range(range_count()):
                 start = 0
                 end = int(P.n)
@@ -163,13 +199,14 @@ def compute_density(spec, real=np.float32):
                         dfsph_neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
                         count += int(r2 < P.h2)
                         continue
-                    if r2 < P.h2:
-                        if not CONTINUITY:
+                    within = r2 < P.h2
+                    if within or (LIST_SKIN > 0 and not walk and r2 < reach2):
+                        if not CONTINUITY and within:
                             sum_w += kernel_w(P, r2)
-                        if NEIGHBOUR_STATS:
+                        if NEIGHBOUR_STATS and within:
                             found += 1
                             fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
-                        if MAX_NEIGHBOURS > 0 and (j != i or image != 0):
+                        if MAX_NEIGHBOURS > 0 and not walk and (j != i or image != 0):
                             if count < MAX_NEIGHBOURS:
                                 pair = j | (image << IMAGE_SHIFT)
                                 if CHUNKED:
@@ -179,9 +216,9 @@ def compute_density(spec, real=np.float32):
                                 else:
                                     dfsph_neighbours[list_slot(P, i, count)] = pair
                             count += 1
-                    if not CONTINUITY or r2 >= P.h2 or (j == i and image == 0):
+                    if not CONTINUITY or not within or (j == i and image == 0):
                         continue
-                    # [6] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
+                    # [7] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
                     #     is mirrored on its flipped axes
                     rlen = np.sqrt(r2)
                     r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
@@ -193,9 +230,9 @@ def compute_density(spec, real=np.float32):
                     vk_y = -vj_y if fy else vj_y
                     vk_z = -vj_z if fz else vj_z
                     v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
-                    # [7] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
+                    # [8] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
                     sum_div += pair_gradient(P, r2, rlen, image) * v_r
-                    # [8] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
+                    # [9] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
                     #     image carries its particle's density, so its hydrostatic difference is its particle's
                     if DENSITY_DIFFUSION > 0:
                         sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x,
@@ -204,9 +241,9 @@ def compute_density(spec, real=np.float32):
             count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                                       count, sum_w)
         kept = min(count, MAX_NEIGHBOURS)
-        if CHUNKED and (kept & 3) != 0:
+        if CHUNKED and not walk and (kept & 3) != 0:
             store_chunk(P, dfsph_neighbours, i, kept, chunk)  # (the last chunk's rest: unread)
-        # [9] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+        # [10] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
         #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w
         drho = real(0.0)
@@ -215,10 +252,10 @@ def compute_density(spec, real=np.float32):
             drho = -P.pressure_coef * sum_div
             if DENSITY_DIFFUSION > 0:
                 drho += P.diffusion_coef * sum_diffusion
-        # [10] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+        # [11] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
         #     density only)
         p = equation_of_state_(P, rho)
-        # [11] store
+        # [12] store
         if not CONTINUITY:
             particle_rho[i] = rho
         particle_p[i] = p
@@ -227,7 +264,12 @@ def compute_density(spec, real=np.float32):
         if NEIGHBOUR_STATS:
             particle_neighbours[i, 0] = found
             particle_neighbours[i, 1] = fingerprint
-        if MAX_NEIGHBOURS > 0:
+        if MAX_NEIGHBOURS > 0 and not walk:
             dfsph_neighbour_count[i] = count  # (longer than its slots: compute_forces scans, DFSPH stops)
+        if LIST_SKIN > 0 and not walk:
+            for c in range(4):
+                scratch_x[i, c] = particle_x[i, c]  # (where the list was built: integrate, the walks)
+        if LIST_SKIN > 0 and not walk and i == 0:
+            dfsph_control[CONTROL_BUILDS] += 1
 
     return launcher(compute_density_main)

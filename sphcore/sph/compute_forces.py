@@ -14,7 +14,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.cells import cells
+from sphcore.sph.cells import cells, skin
+from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
@@ -31,6 +32,8 @@ def compute_forces(spec, real=np.float32):
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
     DFSPH, MAX_NEIGHBOURS = spec.DFSPH, spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
+    near_walls_within, list_reach = skin(spec, real)[:2]
+    LIST_SKIN = spec.LIST_SKIN
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
     image_velocity = walls(spec, real)[2]
@@ -41,7 +44,8 @@ def compute_forces(spec, real=np.float32):
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
-                            cell_pyramid, cell_start, obstacle_box, dfsph_neighbours, dfsph_neighbour_count):
+                            cell_pyramid, cell_start, scratch_x, obstacle_box, dfsph_control, dfsph_neighbours,
+                            dfsph_neighbour_count):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -57,8 +61,15 @@ def compute_forces(spec, real=np.float32):
         pi = particle_p[i]
         pi_rho2 = pi / (rhoi * rhoi)
         # [3] wall and obstacle images, as in compute_density; an image's normal velocity is reversed
-        #     (free slip); `inward` points from each axis's mirror plane into the fluid
-        mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        #     (free slip); `inward` points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN):
+        #     the walls and cells of where i was at the list's build, as compute_density's
+        x_built_x = scratch_x[i, 0] if LIST_SKIN > 0 else xi_x
+        x_built_y = scratch_x[i, 1] if LIST_SKIN > 0 else xi_y
+        x_built_z = scratch_x[i, 2] if LIST_SKIN > 0 else xi_z
+        if LIST_SKIN > 0:
+            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
+        else:
+            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] sums over every other particle and every image within h
@@ -82,6 +93,8 @@ def compute_forces(spec, real=np.float32):
                 chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
                     P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                     inward_x, inward_y, inward_z)
+                if LIST_SKIN > 0 and r2 >= P.h2:
+                    continue  # (a reused list holds pairs out to list_reach)
                 grad = pair_gradient(P, r2, rlen, image)
                 rhoj = particle_rho[j]
                 if not DFSPH:
@@ -105,7 +118,7 @@ def compute_forces(spec, real=np.float32):
         for image in range(8):
             if listed or (image & ~mirrored) != 0:
                 continue
-            xm_x, xm_y, xm_z = reflected(xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, image)
+            xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
             for k in range(range_count()):
@@ -185,10 +198,13 @@ def compute_forces(spec, real=np.float32):
             a_x += P.gravity[0]
             a_y += P.gravity[1]
             a_z += P.gravity[2]
-        # [12] store
+        # [12] store; reused lists: the next build is integrate's to ask for (every dispatch that reads the request
+        #      has run: backends.plan)
         particle_a[i, 0] = a_x
         particle_a[i, 1] = a_y
         particle_a[i, 2] = a_z
         particle_a[i, 3] = real(0.0)
+        if LIST_SKIN > 0 and i == 0:
+            dfsph_control[CONTROL_REBUILD] = 0
 
     return launcher(compute_forces_main)

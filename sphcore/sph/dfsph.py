@@ -27,6 +27,8 @@ CONTROL_RUNNING = 12  # 1: the recorded dispatches run; 0 once a solve spent its
 CONTROL_WINDOW = 13  # [CONTROL_WINDOW + solve]: the iterations the host recorded per window (0: no window)
 CONTROL_DISPATCH = 16  # [dispatch_base(solve)]: the solve's indirect dispatch arguments, (x, y, z) work
 #                        groups of its dfsph_velocity and dfsph_residual
+CONTROL_REBUILD = 22  # the state equation's reused lists (LIST_SKIN): 1 where the next step builds them
+CONTROL_BUILDS = 23  # the builds so far (compute_density)
 CONTROL_SIZE = 32
 IMAGE_SHIFT = 29  # dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)
 NEIGHBOUR_MASK = (1 << IMAGE_SHIFT) - 1

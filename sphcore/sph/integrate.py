@@ -1,6 +1,7 @@
 """Time step (integrators.py: symplectic Euler or the kick-drift-kick Verlet leapfrog), box walls and
 obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt wrote into
-time_state this step.
+time_state this step. Reused lists (LIST_SKIN): a particle that has moved too far from where it was at the
+lists' build asks for the next build (cells.glsl: moved_limit2).
 
 Mirror of shaders/sph/integrate.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -10,6 +11,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.cells import skin
+from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.integrators import integrators
 from sphcore.workgroups import launcher
 
@@ -20,9 +23,12 @@ def integrate(spec, real=np.float32):
     DIM, WALLS, OBSTACLES = spec.DIM, spec.WALLS, spec.OBSTACLES
     VERLET, ADAPTIVE_DT = spec.VERLET, spec.ADAPTIVE_DT
     drift_velocity, stored_velocity = integrators(spec, real)[2:]
+    moved_limit2 = skin(spec, real)[2]
+    LIST_SKIN = spec.LIST_SKIN
 
     @njit
-    def integrate_main(i, params, particle_x, particle_v, particle_a, obstacle_box, particle_vh, time_state):
+    def integrate_main(i, params, particle_x, particle_v, particle_a, scratch_x, obstacle_box, particle_vh, time_state,
+                       dfsph_control):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -99,4 +105,12 @@ def integrate(spec, real=np.float32):
             particle_vh[i, 1] = v_y
             particle_vh[i, 2] = v_z
             particle_vh[i, 3] = real(0.0)
+        # [7] reused lists: the next step builds them where this particle has moved too far since the last build
+        #     (every particle that has writes the same 1)
+        if LIST_SKIN > 0:
+            moved_x = x_x - scratch_x[i, 0]
+            moved_y = x_y - scratch_x[i, 1]
+            moved_z = x_z - scratch_x[i, 2]
+            if moved_x * moved_x + moved_y * moved_y + moved_z * moved_z > moved_limit2(P):
+                dfsph_control[CONTROL_REBUILD] = 1
     return launcher(integrate_main)

@@ -74,4 +74,4 @@ def neighbour_list(spec, real=np.float32):
         g = real(P.pressure_coef) / real(P.rest_density) * pair_gradient(P, r2, rlen, image)
         return chunk, j, image, -(g * r_hat_x), -(g * r_hat_y), -(g * r_hat_z)
 
-    return listed_pair, listed_gradient
+    return listed_pair, listed_gradient, listed_word

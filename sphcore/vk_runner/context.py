@@ -202,7 +202,8 @@ class Recording:
     def dispatch(self, pipeline, push, n_invocations=None, groups=None, predicate=None):
         """Bind `pipeline`, push the bytes of `push` and dispatch enough groups for n invocations
         (or `groups`, an (x, y, z) triple); with `predicate`, a (buffer, byte offset), only where the
-        32-bit word there is not 0 when the dispatch runs (conditional rendering)."""
+        32-bit word there is not 0 when the dispatch runs (conditional rendering); (buffer, byte offset, True):
+        only where it is 0."""
         self._bind(pipeline, push)
         if groups is None:
             groups = ((int(n_invocations) + pipeline.local_size - 1) // pipeline.local_size, 1, 1)
@@ -222,9 +223,11 @@ class Recording:
     def _begin(self, predicate):
         if predicate is not None:
             vk = self.ctx.vk
-            buffer, offset = predicate
+            buffer, offset, inverted = (*predicate, False)[:3]
+            flags = vk.VK_CONDITIONAL_RENDERING_INVERTED_BIT_EXT if inverted else 0
             self.ctx.cmd_begin_conditional(self.command_buffer, vk.VkConditionalRenderingBeginInfoEXT(
-                sType=vk.VK_STRUCTURE_TYPE_CONDITIONAL_RENDERING_BEGIN_INFO_EXT, buffer=buffer.buffer, offset=offset))
+                sType=vk.VK_STRUCTURE_TYPE_CONDITIONAL_RENDERING_BEGIN_INFO_EXT, buffer=buffer.buffer, offset=offset,
+                flags=flags))
 
     def _end(self, predicate):
         if predicate is not None:
