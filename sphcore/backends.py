@@ -164,6 +164,11 @@ ALWAYS, BUILD, REUSE = 0, 1, 2
 Stage.__new__.__defaults__ = (0, False, ALWAYS)
 
 
+def profile_name(stage):
+    """A stage's row in a profile: its name, "compute_density (walk)" for the walk of reused lists."""
+    return stage.name + (" (walk)" if stage.when == REUSE else "")
+
+
 def neighbour_stages(cell_total):
     """The grid's stages: count particles per cell, reduce the pyramid, offsets, sort."""
     levels = pyramid_levels(cell_total)[0]
@@ -448,7 +453,7 @@ class NumbaBackend:
                 if n_groups:  # (as step: a launch of no work groups is skipped)
                     start = time.perf_counter()
                     launch(n_groups, self.local_size, params, *buffers)
-                    self.profile.add(stage.name, time.perf_counter() - start)
+                    self.profile.add(profile_name(stage), time.perf_counter() - start)
         self.profile.steps += count
 
     def read(self, names=None):
@@ -577,7 +582,7 @@ class VulkanBackend:
         self.ctx.submit(rec)
         if rec.timer is not None:
             for stage, seconds in zip(rec.stages, rec.timer.seconds()):
-                self.profile.add(stage.name, seconds)
+                self.profile.add(profile_name(stage), seconds)
 
     def _submit_steps(self, steps):
         self._submit(self._recording(steps, self.stages, timed=self.profile is not None))

@@ -11,6 +11,7 @@ import pytest
 from conftest import BACKENDS, vulkan_or_skip
 from reference import density_pressure, neighbours
 from sphcore.backends import REUSE, Stage, list_entries
+from sphcore.profile import Profile
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation, run
 from sphcore.sph.dfsph import CONTROL_BUILDS, CONTROL_REBUILD, IMAGE_SHIFT, NEIGHBOUR_MASK
@@ -155,6 +156,19 @@ def test_a_run_counts_its_builds(tmp_path):
     final = run(scene, "numba", 200, tmp_path, progress=False)
     assert 4 < int(np.load(tmp_path / "final.npz")["list_builds"]) < 100
     assert np.isfinite(final["position"]).all()
+
+
+def test_numba_runs_the_sort_and_scan_at_builds_only_and_profiles_the_walk_apart():
+    """On numba a step launches either the sort and the build's scan or the walk, as the device's flag says, and
+    the profile counts each as often as it ran ("compute_density (walk)" apart from the build)."""
+    profile = Profile()
+    with Simulation(scene_of(), "numba", profile=profile) as sim:
+        sim.step(120)
+        builds = int(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS]) - 1  # (less the start's)
+    assert 2 <= builds < 60, builds
+    assert profile.calls["compute_density"] == profile.calls["count_cells"] == builds
+    assert profile.calls["compute_density (walk)"] == 120 - builds
+    assert profile.calls["compute_forces"] == profile.calls["integrate"] == 120
 
 
 @pytest.mark.parametrize("changes, message", [
