@@ -437,10 +437,10 @@ class Scene:
                 raise SceneError(f"domain.box_max - domain.box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
                                  f"2 h = {2 * self.h:g} m (h = fluid.spacing * fluid.smoothing_ratio)")
             skin = self.skin_thousandths / 1000
-            if skin > 0 and self["domain.boundary"] == "walls" and hi[axis] - lo[axis] <= (2 + 3 * skin) * self.h:
+            if skin > 0 and self["domain.boundary"] == "walls" and hi[axis] - lo[axis] <= (2 + 1.5 * skin) * self.h:
                 raise SceneError(f"domain.box_max - domain.box_min = {hi[axis] - lo[axis]:g} m on axis {axis} must exceed "
-                                 f"(2 + 3 physics.list_skin) h = {(2 + 3 * skin) * self.h:g} m with reused lists (a "
-                                 "particle's walls are those of where it was at the lists' build)")
+                                 f"(2 + 1.5 physics.list_skin) h = {(2 + 1.5 * skin) * self.h:g} m with reused lists (a "
+                                 "particle's wall on each axis is the one it was near at the lists' build)")
         for i, block in enumerate(self["fluid.blocks"]):
             if any(block["min"][a] < lo[a] or block["max"][a] > hi[a] for a in range(dim)):
                 raise SceneError(f"fluid.blocks[{i}]: {block} is not inside the box domain.box_min .. domain.box_max = "

@@ -35,6 +35,11 @@ SCENE_3D = {
     "forces": {"gravity": [0.0, -9.81, 0.0]},
     "time": {"dt": 4e-4},
 }
+# the same in a channel 2.4 h deep, whose walls are both within reach of a build's (1 + 0.2) h: each particle keeps
+# the wall it was near at the build (Scene refuses a channel narrower than (2 + 1.5 list_skin) h)
+SCENE_NARROW = copy.deepcopy(SCENE_3D)
+SCENE_NARROW["physics"]["list_skin"] = 0.2
+SCENE_NARROW["domain"]["box_max"][2] = SCENE_NARROW["fluid"]["blocks"][0]["max"][2] = 0.096
 READ = ("particle_x", "particle_id", "particle_rho", "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_control")
 
 
@@ -96,7 +101,7 @@ def test_reused_lists_hold_every_pair_within_h_and_give_the_all_pairs_density(ba
         assert all(c[2] > len(x) / 2 for c in checked), checked  # (most lists overflowed)
 
 
-@pytest.mark.parametrize("base", [SCENE, SCENE_3D], ids=["2d", "3d"])
+@pytest.mark.parametrize("base", [SCENE, SCENE_3D, SCENE_NARROW], ids=["2d", "3d", "3d_narrow"])
 def test_reused_lists_give_the_states_of_lists_built_every_step(base):
     """The same pairs, summed in the build's order: in float64, 300 steps with lists reused end within 1e-9 m and
     1e-8 of the density of the run that sorts and builds every step (Vulkan: lavapipe builds float64 pipelines in
@@ -179,7 +184,7 @@ def test_numba_runs_the_sort_and_scan_at_builds_only_and_profiles_the_walk_apart
     ({"physics.density": "continuity"}, "physics.density"),
     ({"physics.neighbour_search": "all_pairs"}, "physics.neighbour_search"),
     ({"domain.obstacles": [{"min": [0.3, 0.0], "max": [0.35, 0.1]}]}, "domain.obstacles"),
-    ({"domain.box_max": [0.6, 0.05], "fluid.blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.04]}]}, "axis 1"),
+    ({"domain.box_max": [0.6, 0.045], "fluid.blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.04]}]}, "axis 1"),
 ])
 def test_bad_values_are_rejected_naming_the_key(changes, message):
     with pytest.raises(SceneError) as e:
