@@ -64,6 +64,8 @@ CONFIGS = {
     # DFSPH for water that must come to rest: Wendland C2 on 2 dx, 0.8 of each Jacobi update (a tank at rest:
     # 0.0007 against 0.062 m/s median speed with "dfsph"; the same Martin & Moyce front as omega = 1)
     "dfsph_wendland": {"physics.pressure_solver": "dfsph", "physics.kernel": "wendland_c2", "fluid.relaxation": 0.8},
+    # issue 15: "graphics" with its neighbour lists reused between builds (the same pairs: a speed switch only)
+    "list_skin": {"physics.list_skin": 0.1},
     "engineering_summation": {k: v for k, v in ENGINEERING.items() if k not in (
         "physics.density", "physics.density_diffusion", "fluid.density_diffusion")},
 }
