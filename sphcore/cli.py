@@ -45,7 +45,8 @@ def cmd_run(args):
     if args.profile:
         from sphcore.profile import report
         print(report(options["profile"], scene, arrays["position"], out))
-    print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed}, "
+    builds = f", neighbour lists built {int(arrays['list_builds'])} times" if "list_builds" in arrays else ""
+    print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed}{builds}, "
           f"t = {float(arrays['time']):.4g} s -> {out}/final.npz, {out}/{scene['name']}.pvd")
 
 
