@@ -563,17 +563,28 @@ class VulkanBackend:
             running = (control, 4 * CONTROL_RUNNING) if predicate else None
             if timed:
                 rec.timestamp(rec.timer, 0)
+            # reused lists: a run of BUILD (or REUSE) stages is one block of conditional rendering (with a predicate
+            # per dispatch the H200 took 0.630 instead of 0.600 ms a step at 1 M particles and a skin of 0.1 h)
+            when = lambda w: None if w == ALWAYS else (control, 4 * CONTROL_REBUILD, w == REUSE)  # noqa: E731
+            block = ALWAYS
             for k, stage in enumerate(rec.stages):
+                if stage.when != block:
+                    rec.end_conditional(when(block))
+                    rec.begin_conditional(when(stage.when))
+                    block = stage.when
                 if stage.indirect:
                     rec.dispatch_indirect(self.pipelines[stage.name], stage_params(self.params, stage), control,
                                           4 * indirect_offset(stage), predicate=running)
                 else:
-                    when = (control, 4 * CONTROL_REBUILD, stage.when == REUSE) if stage.when != ALWAYS else running
                     rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
-                                 dispatch_size(stage, self.params), predicate=when)
-                rec.barrier()
+                                 dispatch_size(stage, self.params), predicate=running if block == ALWAYS else None)
+                # a barrier for the commands too where the next stage (of the step, or of the next step) reads
+                # dfsph_control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
+                after = rec.stages[(k + 1) % len(rec.stages)]
+                rec.barrier(predicate or after.indirect or after.when not in (ALWAYS, stage.when))
                 if timed:
                     rec.timestamp(rec.timer, 1 + k)
+            rec.end_conditional(when(block))
             self._recordings[key] = rec.end()
         return self._recordings[key]
 
