@@ -63,8 +63,9 @@ def plot_3d(datasets, out):
     fig, ax = plt.subplots(figsize=(7, 5))
     for data in datasets:
         rows = sorted(data["results"], key=lambda r: r["n"])
-        ax.plot([r["n"] for r in rows], [r["particle_steps_per_second"] for r in rows], "o-",
-                label=f"{data['backend']}: {data['device']}")
+        skin = rows[0].get("list_skin", 0.0)  # (a run with the lists reused: physics.list_skin)
+        ax.plot([r["n"] for r in rows], [r["particle_steps_per_second"] for r in rows], "^-" if skin else "o-",
+                label=f"{data['backend']}: {data['device']}" + (f", lists reused (skin {skin:g} h)" if skin else ""))
     seed2 = next((d["seed2_ms_per_step_cpu_gpu"] for d in datasets if "seed2_ms_per_step_cpu_gpu" in d), None)
     if seed2:
         ns = sorted(int(n) for n in seed2)
@@ -75,7 +76,7 @@ def plot_3d(datasets, out):
     ax.set_yscale("log")
     ax.set_xlabel("particles N")
     ax.set_ylabel("particle-steps per second")
-    ax.set_title("sphcore 3D WCSPH step, grid neighbours (sort every step)")
+    ax.set_title("sphcore 3D WCSPH step, grid neighbours")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     out.parent.mkdir(parents=True, exist_ok=True)
