@@ -11,9 +11,9 @@ import pytest
 from conftest import BACKENDS, vulkan_or_skip
 from reference import density_pressure, neighbours
 from sphcore.backends import REUSE, Stage, list_entries
+from sphcore.cli import main
 from sphcore.profile import Profile
 from sphcore.scene import Scene, SceneError
-from sphcore.cli import main
 from sphcore.simulation import Simulation
 from sphcore.sph.dfsph import CONTROL_BUILDS, CONTROL_REBUILD, IMAGE_SHIFT, NEIGHBOUR_MASK
 
