@@ -1,3 +1,4 @@
+import copy
 import os
 
 # numba's OpenMP workers spin between parallel loops; on a 2-core CI machine that starves
@@ -8,6 +9,7 @@ import numpy as np
 import pytest
 
 from sphcore.backends import empty_state, in_particle_order, make_backend, plan
+from sphcore.scene import Scene
 
 BACKENDS = ["numba", "vulkan"]
 
@@ -48,6 +50,15 @@ def open_backend():
         messages = list(backend.ctx.validation_messages) if backend.name == "vulkan" else []
         backend.close()
         assert messages == [], f"Vulkan validation errors: {messages}"
+
+
+def scene_changed(base, **changes):
+    """The Scene of dict `base` with each "table.key" of `changes` set to its value (`base` itself unchanged)."""
+    data = copy.deepcopy(base)
+    for dotted, value in changes.items():
+        table, key = dotted.split(".")
+        data.setdefault(table, {})[key] = value
+    return Scene.from_dict(data)
 
 
 def scene_state(scene, jitter=0.0, seed=0):

@@ -5,13 +5,12 @@ on a planted divergence, an unconverged solve reported, resume bitwise, the new 
 Most cases share one 2D scene (one numba compilation of the solver's mirrors); the 3D, obstacle and
 float64 variants run on Vulkan, where a pipeline builds in a moment.
 """
-import copy
 import warnings
 
 import numpy as np
 import pytest
 
-from conftest import VALIDATION, assert_stage_agrees, schedule_dependent, vulkan_or_skip
+from conftest import VALIDATION, assert_stage_agrees, scene_changed, schedule_dependent, vulkan_or_skip
 from reference import neighbours
 from sphcore.backends import Stage, empty_state, list_entries, make_backend, plan
 from sphcore.pressure_solver import ConvergenceWarning, init_state
@@ -35,11 +34,7 @@ STAGE_RTOL = 2e-5
 
 
 def scene_of(**changes):
-    data = copy.deepcopy(SCENE)
-    for dotted, value in changes.items():
-        table, key = dotted.split(".")
-        data.setdefault(table, {})[key] = value
-    return Scene.from_dict(data)
+    return scene_changed(SCENE, **changes)
 
 
 def log_of(sim):

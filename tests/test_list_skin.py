@@ -8,12 +8,12 @@ import copy
 import numpy as np
 import pytest
 
-from conftest import BACKENDS, vulkan_or_skip
+from conftest import BACKENDS, scene_changed, vulkan_or_skip
 from reference import density_pressure, neighbours
 from sphcore.backends import REUSE, Stage, list_entries
 from sphcore.cli import main
 from sphcore.profile import Profile
-from sphcore.scene import Scene, SceneError
+from sphcore.scene import SceneError
 from sphcore.simulation import Simulation
 from sphcore.sph.dfsph import CONTROL_BUILDS, CONTROL_REBUILD, IMAGE_SHIFT, NEIGHBOUR_MASK
 
@@ -45,11 +45,7 @@ READ = ("particle_x", "particle_id", "particle_rho", "dfsph_neighbours", "dfsph_
 
 
 def scene_of(base=SCENE, **changes):
-    data = copy.deepcopy(base)
-    for dotted, value in changes.items():
-        table, key = dotted.split(".")
-        data.setdefault(table, {})[key] = value
-    return Scene.from_dict(data)
+    return scene_changed(base, **changes)
 
 
 def backend_or_skip(backend):

@@ -65,17 +65,14 @@ const bool CHUNKED = LIST_CHUNKS && !LIST_BY_PARTICLE && !LIST_FIRST;
 // list's order, and takes self out of the list: returns the others' count.
 uint listed_sum(uint i, real3 xi, real3 wall, uint count, inout real sum_w) {
     uint self_seen = 0u;
+    uvec4 chunk = uvec4(0u);
     for (uint slot = 0u; slot < count; ++slot) {
-        uint pair = dfsph_neighbours[list_slot(i, slot)];
-        uint j = pair & NEIGHBOUR_MASK;
-        uint image = pair >> IMAGE_SHIFT;
-        real3 xk = particle_x[j].xyz;
-        if (image != 0u) xk = reflected(xk, wall, image);
-        real3 r = xi - xk;
-        real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-        sum_w += kernel_w(r2);
-        dfsph_neighbours[list_slot(i, slot - self_seen)] = pair;
-        self_seen |= uint(pair == i);
+        uint j;
+        uint image;
+        real3 r;
+        sum_w += kernel_w(listed_distance(i, slot, chunk, xi, wall, j, image, r));
+        dfsph_neighbours[list_slot(i, slot - self_seen)] = j | (image << IMAGE_SHIFT);
+        self_seen |= uint(j == i && image == 0u);
     }
     return count - self_seen;
 }
@@ -129,13 +126,10 @@ void main() {
     if (!scanning) {
         sum_w = kernel_w(real(0.0));
         for (uint slot = 0u; slot < count; ++slot) {
-            uint pair = listed_word(i, slot, chunk);
-            uint j = pair & NEIGHBOUR_MASK;
-            uint image = pair >> IMAGE_SHIFT;
-            real3 xk = particle_x[j].xyz;
-            if (image != 0u) xk = reflected(xk, wall, image);
-            real3 r = xi - xk;
-            real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+            uint j;
+            uint image;
+            real3 r;
+            real r2 = listed_distance(i, slot, chunk, xi, wall, j, image, r);
             if (r2 < P.h2) sum_w += kernel_w(r2);
         }
     }

@@ -14,17 +14,24 @@ uint listed_word(uint i, uint slot, inout uvec4 chunk) {
 }
 
 // Entry `slot` of particle i's list: its neighbour j, or j's image across the walls and obstacle faces
-// whose bits are set in `image` (`wall`, `inward`: near_walls and near_obstacles at xi), with r = xi - x_k,
-// r2 and rlen, the squared and plain distance to it; returns the direction from it to i (pairs.glsl).
-real3 listed_pair(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, real3 inward, out uint j,
-                  out uint image, out real3 r, out real r2, out real rlen) {
+// whose bits are set in `image` (`wall`: near_walls and near_obstacles at xi), with r = xi - x_k; returns r2,
+// the squared distance to it.
+real listed_distance(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, out uint j, out uint image,
+                     out real3 r) {
     uint pair = listed_word(i, slot, chunk);
     j = pair & NEIGHBOUR_MASK;
     image = pair >> IMAGE_SHIFT;
     real3 xk = particle_x[j].xyz;
     if (image != 0u) xk = reflected(xk, wall, image);  // (most entries are particles: no selects for them)
     r = xi - xk;
-    r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+    return r.x * r.x + r.y * r.y + r.z * r.z;
+}
+
+// The same, with rlen, the plain distance (`inward`: near_obstacles at xi); returns the direction from the entry
+// to i (pairs.glsl).
+real3 listed_pair(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, real3 inward, out uint j,
+                  out uint image, out real3 r, out real r2, out real rlen) {
+    r2 = listed_distance(i, slot, chunk, xi, wall, j, image, r);
     rlen = sqrt(r2);
     return pair_direction(r, rlen, i, j, image, inward);
 }

@@ -17,7 +17,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells, skin
 from sphcore.sph.density_diffusion import density_diffusion
-from sphcore.sph.dfsph import CONTROL_BUILDS, IMAGE_SHIFT, NEIGHBOUR_MASK, list_slots, store_chunk, with_lane
+from sphcore.sph.dfsph import CONTROL_BUILDS, IMAGE_SHIFT, list_slots, store_chunk, with_lane
 from sphcore.sph.equation_of_state import equation_of_state
 from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
@@ -47,7 +47,7 @@ def compute_density(spec, real=np.float32):
     DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_walls_within, list_reach = skin(spec, real)[:2]
-    listed_word = neighbour_list(spec, real)[2]
+    listed_distance = neighbour_list(spec, real)[2]
     LIST_SKIN = spec.LIST_SKIN
     near_obstacles, solid = obstacles(spec, real)
     OBSTACLES = spec.OBSTACLES
@@ -74,20 +74,13 @@ def compute_density(spec, real=np.float32):
         """Adds kernel_w over the `count` entries of i's list (a list-first scan's, self among them) to sum_w
         in the list's order, and takes self out of the list: returns (the others' count, sum_w)."""
         self_seen = 0
+        chunk = (0, 0, 0, 0)
         for slot in range(count):
-            pair = int(dfsph_neighbours[list_slot(P, i, slot)])
-            j = pair & NEIGHBOUR_MASK
-            image = pair >> IMAGE_SHIFT
-            xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
-            if image != 0:
-                xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
-            r_x = xi_x - xk
-            r_y = xi_y - yk
-            r_z = xi_z - zk
-            r2 = r_x * r_x + r_y * r_y + r_z * r_z
+            chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x,
+                                                                 xi_y, xi_z, wall_x, wall_y, wall_z)
             sum_w += kernel_w(P, r2)
-            dfsph_neighbours[list_slot(P, i, slot - self_seen)] = pair
-            self_seen |= int(pair == i)
+            dfsph_neighbours[list_slot(P, i, slot - self_seen)] = j | (image << IMAGE_SHIFT)
+            self_seen |= int(j == i and image == 0)
         return count - self_seen, sum_w
 
     @njit
@@ -151,16 +144,8 @@ def compute_density(spec, real=np.float32):
         if not scanning:
             sum_w = kernel_w(P, real(0.0))
             for slot in range(count):
-                pair, chunk = listed_word(P, dfsph_neighbours, i, slot, chunk)
-                j = pair & NEIGHBOUR_MASK
-                image = pair >> IMAGE_SHIFT
-                xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
-                if image != 0:
-                    xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
-                r_x = xi_x - xk
-                r_y = xi_y - yk
-                r_z = xi_z - zk
-                r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk,
+                                                                     xi_x, xi_y, xi_z, wall_x, wall_y, wall_z)
                 if r2 < P.h2:
                     sum_w += kernel_w(P, r2)
         for image in range(8):

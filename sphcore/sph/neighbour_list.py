@@ -39,10 +39,8 @@ def neighbour_list(spec, real=np.float32):
         return lane_of(chunk, slot & 3), chunk
 
     @njit
-    def listed_pair(P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
-                    inward_x, inward_y, inward_z):
-        """Entry `slot` of particle i's list: (chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y,
-        r_hat_z)."""
+    def listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z):
+        """Entry `slot` of particle i's list: (chunk, j, image, r_x, r_y, r_z, r2)."""
         pair, chunk = listed_word(P, dfsph_neighbours, i, slot, chunk)
         j = pair & NEIGHBOUR_MASK
         image = pair >> IMAGE_SHIFT
@@ -52,7 +50,14 @@ def neighbour_list(spec, real=np.float32):
         r_x = xi_x - xk
         r_y = xi_y - yk
         r_z = xi_z - zk
-        r2 = r_x * r_x + r_y * r_y + r_z * r_z
+        return chunk, j, image, r_x, r_y, r_z, r_x * r_x + r_y * r_y + r_z * r_z
+
+    @njit
+    def listed_pair(P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
+                    inward_x, inward_y, inward_z):
+        """The same, with (..., r2, rlen, r_hat_x, r_hat_y, r_hat_z): the direction from the entry to i."""
+        chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x,
+                                                             xi_y, xi_z, wall_x, wall_y, wall_z)
         rlen = np.sqrt(r2)
         r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
         return chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z
@@ -74,4 +79,4 @@ def neighbour_list(spec, real=np.float32):
         g = real(P.pressure_coef) / real(P.rest_density) * pair_gradient(P, r2, rlen, image)
         return chunk, j, image, -(g * r_hat_x), -(g * r_hat_y), -(g * r_hat_z)
 
-    return listed_pair, listed_gradient, listed_word
+    return listed_pair, listed_gradient, listed_distance
