@@ -407,7 +407,6 @@ class Scene:
                     raise SceneError(f'physics.pressure_solver = "dfsph" does not go with {key} = "{value}" ({why})')
         if self["physics.list_skin"] > 0:
             for key, value, why in (("physics.pressure_solver", "dfsph", "its solves walk lists built every step"),
-                                    ("physics.density", "continuity", "the reused lists serve summation density"),
                                     ("physics.neighbour_search", "all_pairs", "the lists are built from the grid")):
                 if self[key] == value:
                     raise SceneError(f'physics.list_skin = {self["physics.list_skin"]:g} does not go with {key} = '

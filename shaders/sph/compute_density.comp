@@ -77,6 +77,28 @@ uint listed_sum(uint i, real3 xi, real3 wall, uint count, inout real sum_w) {
     return count - self_seen;
 }
 
+// Continuity density: one other particle's or image's terms of d rho_i/dt, at r = xi - x_k within h
+// (k: j's image across the walls of `image`'s bits), added to sum_div and sum_diffusion; the scan's and a reused
+// list's walk's
+void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, real rhoi, real3 inward,
+              inout real sum_div, inout real sum_diffusion) {
+    // the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity is mirrored on its
+    // flipped axes
+    real rlen = sqrt(r2);
+    real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
+    real3 vj = particle_v[j].xyz;
+    real vk_x = (image & 1u) != 0u ? -vj.x : vj.x;
+    real vk_y = (image & 2u) != 0u ? -vj.y : vj.y;
+    real vk_z = (image & 4u) != 0u ? -vj.z : vj.z;
+    real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
+    // d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
+    sum_div += pair_gradient(r2, rlen, image) * v_r;
+    // density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an image carries
+    // its particle's density, so its hydrostatic difference is its particle's
+    if (DENSITY_DIFFUSION > 0u)
+        sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
+}
+
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
@@ -118,8 +140,9 @@ void main() {
     uvec4 chunk = uvec4(0u);
     real reach2 = list_reach() * list_reach();
     bool scanning = true;
-    if (walk) {  // [5] a reused list: self, and the listed particles and images now within h, in the list's order;
-                 //     a list that overflowed at its build scans the cells of the build around x_built instead
+    if (walk) {  // [5] a reused list: self, and the listed particles and images now within h, in the list's order
+                 //     (continuity: the others' rates, add_rate); a list that overflowed at its build scans the
+                 //     cells of the build around x_built instead
         count = dfsph_neighbour_count[i];
         scanning = count > MAX_NEIGHBOURS;
     }
@@ -130,14 +153,13 @@ void main() {
             uint image;
             real3 r;
             real r2 = listed_distance(i, slot, chunk, xi, wall, j, image, r);
-            if (r2 < P.h2) sum_w += kernel_w(r2);
+            if (r2 >= P.h2) continue;
+            if (!CONTINUITY) sum_w += kernel_w(r2);
+            if (CONTINUITY) add_rate(i, j, image, r, r2, xi, vi, rhoi, inward, sum_div, sum_diffusion);
         }
     }
     for (uint image = 0u; image < 8u; ++image) {
         if (!scanning || (image & ~mirrored) != 0u) continue;
-        bool fx = (image & 1u) != 0u;
-        bool fy = (image & 2u) != 0u;
-        bool fz = (image & 4u) != 0u;
         real3 xm = reflected(x_built, wall, image);
         ivec3 base = cell_of(xm);
         // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -186,28 +208,17 @@ void main() {
                         count += 1u;
                     }
                 }
-                if (!CONTINUITY || !within || (j == i && image == 0u)) continue;
-                // [7] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
-                //     is mirrored on its flipped axes
-                real rlen = sqrt(r2);
-                real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-                real3 vj = particle_v[j].xyz;
-                real vk_x = fx ? -vj.x : vj.x;
-                real vk_y = fy ? -vj.y : vj.y;
-                real vk_z = fz ? -vj.z : vj.z;
-                real v_r = (vi.x - vk_x) * r_hat.x + (vi.y - vk_y) * r_hat.y + (vi.z - vk_z) * r_hat.z;
-                // [8] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
-                sum_div += pair_gradient(r2, rlen, image) * v_r;
-                // [9] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
-                //     image carries its particle's density, so its hydrostatic difference is its particle's
-                if (DENSITY_DIFFUSION > 0u) sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
+                // [7] continuity: the rates of the others within h (add_rate: the velocity divergence, d rho_i/dt,
+                //     and the density diffusion D_i)
+                if (CONTINUITY && within && (j != i || image != 0u)) add_rate(i, j, image, r, r2, xi, vi, rhoi, inward,
+                                                                             sum_div, sum_diffusion);
             }
         }
     }
     if (listing) count = listed_sum(i, xi, wall, count, sum_w);
     uint kept = min(count, MAX_NEIGHBOURS);
     if (CHUNKED && !walk && (kept & 3u) != 0u) dfsph_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
-    // [10] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+    // [8] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
     //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;
     real drho = real(0.0);
@@ -216,10 +227,10 @@ void main() {
         drho = -P.pressure_coef * sum_div;
         if (DENSITY_DIFFUSION > 0u) drho += P.diffusion_coef * sum_diffusion;
     }
-    // [11] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+    // [9] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
     //     density only)
     real p = equation_of_state(rho);
-    // [12] store
+    // [10] store
     if (!CONTINUITY) particle_rho[i] = rho;
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;

@@ -84,6 +84,32 @@ def compute_density(spec, real=np.float32):
         return count - self_seen, sum_w
 
     @njit
+    def add_rate(P, particle_x, particle_v, particle_rho, i, j, image, r_x, r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y,
+                 vi_z, rhoi, inward_x, inward_y, inward_z, sum_div, sum_diffusion):
+        """Continuity density: one other particle's or image's terms of d rho_i/dt, at r = xi - x_k
+        within h (k: j's image across the walls of `image`'s bits), added to sum_div and sum_diffusion (returned);
+        the scan's and a reused list's walk's."""
+        # the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity is mirrored on its
+        # flipped axes
+        rlen = np.sqrt(r2)
+        r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
+        vj_x = particle_v[j, 0]
+        vj_y = particle_v[j, 1]
+        vj_z = particle_v[j, 2]
+        vk_x = -vj_x if (image & 1) != 0 else vj_x
+        vk_y = -vj_y if (image & 2) != 0 else vj_y
+        vk_z = -vj_z if (image & 4) != 0 else vj_z
+        v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
+        # d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
+        sum_div += pair_gradient(P, r2, rlen, image) * v_r
+        # density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an image carries
+        # its particle's density, so its hydrostatic difference is its particle's
+        if DENSITY_DIFFUSION > 0:
+            sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x, particle_x[j, 1] - xi_y,
+                                            particle_x[j, 2] - xi_z, r2, rlen)
+        return sum_div, sum_diffusion
+
+    @njit
     def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
                              scratch_x, particle_id, particle_neighbours, obstacle_box, particle_drho, dfsph_control,
                              dfsph_neighbours, dfsph_neighbour_count):
@@ -137,8 +163,9 @@ def compute_density(spec, real=np.float32):
         chunk = (0, 0, 0, 0)
         reach2 = list_reach(P) * list_reach(P)
         scanning = True
-        if walk:  # [5] a reused list: self, and the listed particles and images now within h, in the list's order;
-            #         a list that overflowed at its build scans the cells of the build around x_built instead
+        if walk:  # [5] a reused list: self, and the listed particles and images now within h, in the list's order
+            #         (continuity: the others' rates, add_rate); a list that overflowed at its build scans the
+            #         cells of the build around x_built instead
             count = int(dfsph_neighbour_count[i])
             scanning = count > MAX_NEIGHBOURS
         if not scanning:
@@ -146,14 +173,17 @@ def compute_density(spec, real=np.float32):
             for slot in range(count):
                 chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk,
                                                                      xi_x, xi_y, xi_z, wall_x, wall_y, wall_z)
-                if r2 < P.h2:
+                if r2 >= P.h2:
+                    continue
+                if not CONTINUITY:
                     sum_w += kernel_w(P, r2)
+                if CONTINUITY:
+                    sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, i, j, image, r_x, r_y,
+                                                      r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi, inward_x,
+                                                      inward_y, inward_z, sum_div, sum_diffusion)
         for image in range(8):
             if not scanning or (image & ~mirrored) != 0:
                 continue
-            fx = (image & 1) != 0
-            fy = (image & 2) != 0
-            fz = (image & 4) != 0
             xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
             # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
@@ -201,34 +231,19 @@ def compute_density(spec, real=np.float32):
                                 else:
                                     dfsph_neighbours[list_slot(P, i, count)] = pair
                             count += 1
-                    if not CONTINUITY or not within or (j == i and image == 0):
-                        continue
-                    # [7] continuity: the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity
-                    #     is mirrored on its flipped axes
-                    rlen = np.sqrt(r2)
-                    r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x,
-                                                                      inward_y, inward_z)
-                    vj_x = particle_v[j, 0]
-                    vj_y = particle_v[j, 1]
-                    vj_z = particle_v[j, 2]
-                    vk_x = -vj_x if fx else vj_x
-                    vk_y = -vj_y if fy else vj_y
-                    vk_z = -vj_z if fz else vj_z
-                    v_r = (vi_x - vk_x) * r_hat_x + (vi_y - vk_y) * r_hat_y + (vi_z - vk_z) * r_hat_z
-                    # [8] d rho_i/dt = sum_j m (v_i - v_j) . grad_i W_ij = -pressure_coef sum_j kernel_gradient v_ij . r_hat
-                    sum_div += pair_gradient(P, r2, rlen, image) * v_r
-                    # [9] density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an
-                    #     image carries its particle's density, so its hydrostatic difference is its particle's
-                    if DENSITY_DIFFUSION > 0:
-                        sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x,
-                                                        particle_x[j, 1] - xi_y, particle_x[j, 2] - xi_z, r2, rlen)
+                    # [7] continuity: the rates of the others within h (add_rate: the velocity divergence, d rho_i/dt,
+                    #     and the density diffusion D_i)
+                    if CONTINUITY and within and (j != i or image != 0):
+                        sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, i, j, image, r_x,
+                                                          r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
+                                                          inward_x, inward_y, inward_z, sum_div, sum_diffusion)
         if listing:
             count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                                       count, sum_w)
         kept = min(count, MAX_NEIGHBOURS)
         if CHUNKED and not walk and (kept & 3) != 0:
             store_chunk(P, dfsph_neighbours, i, kept, chunk)  # (the last chunk's rest: unread)
-        # [10] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+        # [8] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
         #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w
         drho = real(0.0)
@@ -237,10 +252,10 @@ def compute_density(spec, real=np.float32):
             drho = -P.pressure_coef * sum_div
             if DENSITY_DIFFUSION > 0:
                 drho += P.diffusion_coef * sum_diffusion
-        # [11] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+        # [9] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
         #     density only)
         p = equation_of_state_(P, rho)
-        # [12] store
+        # [10] store
         if not CONTINUITY:
             particle_rho[i] = rho
         particle_p[i] = p

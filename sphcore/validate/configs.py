@@ -66,6 +66,9 @@ CONFIGS = {
     "dfsph_wendland": {"physics.pressure_solver": "dfsph", "physics.kernel": "wendland_c2", "fluid.relaxation": 0.8},
     # issue 15: "graphics" with its neighbour lists reused between builds (the same pairs: a speed switch only)
     "list_skin": {"physics.list_skin": 0.1},
+    # issue 15: the recommended model with its neighbour lists reused between builds (continuity density: the walks
+    # add each pair's rate)
+    "engineering_list_skin": {**ENGINEERING, "physics.list_skin": 0.1},
     "engineering_summation": {k: v for k, v in ENGINEERING.items() if k not in (
         "physics.density", "physics.density_diffusion", "fluid.density_diffusion")},
 }
