@@ -4,8 +4,10 @@ The Martin & Moyce dam break of `sphcore validate dam-break` (--dimension 2, or 
 is wide: --resolution particles across a and across the channel) in each --configs model of
 sphcore.validate.configs, run from rest to --t-end once per --skins value (0: a sort and a scan every step), with
 --per-submit steps a submit and no state read in between. Per run: steps, wall seconds per simulated second,
-builds per step, the largest distance of a particle from the skin-0 run's at the end, and with --profile each stage's
-ms per step (a second run, every dispatch timed). Printed and written as JSON: the trade of the reused lists in a
+builds per step, the front at the end (the furthest particle with a third of the bulk's neighbours, as the validation
+measures it) and the largest distance of a particle from the first run's (skin 0 by default: round-off grows in a
+splash, so this is large where the front agrees), and with --profile each stage's ms per step (a second run, every
+dispatch timed). Printed and written as JSON: the trade of the reused lists in a
 whole run, where the flow's fastest particle sets how often they are built.
 
     python3 benchmarks/list_skin_runs.py --configs graphics engineering --out benchmarks/results/list_skin_runs_cpu.json
@@ -22,7 +24,7 @@ from sphcore.profile import Profile
 from sphcore.scene import Scene
 from sphcore.simulation import Simulation
 from sphcore.sph.dfsph import CONTROL_BUILDS
-from sphcore.validate.dam_break import dam_break_scene
+from sphcore.validate.dam_break import dam_break_scene, furthest, min_neighbours
 
 
 def run(scene, backend, t_end, per_submit, profile=None):
@@ -69,7 +71,9 @@ def main():
             scene = Scene.from_dict(base)
             row, x = run(scene, args.backend, args.t_end, args.per_submit)
             plain = x if plain is None else plain
+            x64 = x.astype(np.float64)
             row.update(config=config, list_skin=skin, dimension=args.dimension, resolution=args.resolution,
+                       front_m=furthest(x64, x64[:, 0], scene.h, min_neighbours(scene)),
                        max_distance_from_first_run_m=float(np.abs(x - plain).max()))
             if args.profile:
                 profile = Profile()
@@ -78,7 +82,7 @@ def main():
             rows.append(row)
             print(f"{config}, list_skin {skin:g}: {row['particles']} particles, {row['steps']} steps, "
                   f"{row['ms_per_step']:.3f} ms a step, {row['wall_per_simulated_s']:.2f} s per simulated s, "
-                  f"builds {row['builds_per_step']:.2f} a step", flush=True)
+                  f"builds {row['builds_per_step']:.2f} a step, front {row['front_m']:.4f} m", flush=True)
     if args.out:
         Path(args.out).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
 

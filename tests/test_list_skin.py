@@ -41,8 +41,9 @@ SCENE_3D = {
 SCENE_NARROW = copy.deepcopy(SCENE_3D)
 SCENE_NARROW["physics"]["list_skin"] = 0.2
 SCENE_NARROW["domain"]["box_max"][2] = SCENE_NARROW["fluid"]["blocks"][0]["max"][2] = 0.096
-# the engineering model (scenes/dam_break_2d.toml's): continuity density with density diffusion, whose walks add each
-# pair's rate; kick-drift-kick Verlet and the device's adaptive dt; in 3D the hydrostatic diffusion of Fourtakas
+# the engineering model's switches (scenes/dam_break_2d.toml's, on these scenes' 2 dx support): continuity density with
+# density diffusion, whose walks add each pair's rate; kick-drift-kick Verlet and the device's adaptive dt; in 3D the
+# hydrostatic diffusion of Fourtakas et al.
 ENGINEERING = {"kernel": "wendland_c2", "density": "continuity", "density_diffusion": "molteni",
                "viscosity_model": "artificial"}
 SCENE_CONTINUITY = copy.deepcopy(SCENE)
