@@ -52,6 +52,7 @@ def main():
     ap.add_argument("--dimension", type=int, default=2)
     ap.add_argument("--resolution", type=int, default=40)
     ap.add_argument("--configs", nargs="+", default=["graphics", "engineering"])
+    ap.add_argument("--smoothing-ratio", type=float, help="h / dx where the configuration does not set it (graphics: 2)")
     ap.add_argument("--skins", type=float, nargs="+", default=[0.0, 0.1, 0.2])
     ap.add_argument("--t-end", type=float, default=0.5)
     ap.add_argument("--per-submit", type=int, default=50)
@@ -64,6 +65,8 @@ def main():
                     "backend": args.backend}
         if args.dimension == 3:
             settings["depth"] = args.resolution
+        if args.smoothing_ratio:
+            settings["smoothing_ratio"] = args.smoothing_ratio
         base = json.loads(dam_break_scene(settings).to_json())
         plain = None
         for skin in args.skins:

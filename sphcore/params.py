@@ -124,14 +124,15 @@ def pyramid_levels(cell_total):
 def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
                     gravity, box_min, box_max, grid_dim=(1, 1, 1), kernel="mueller", density_diffusion="none",
                     diffusion_delta=0.1, gravity_on=True, viscosity_model="laminar", alpha=0.0, cfl_number=0.0,
-                    reach=None):
+                    reach=None, cell_split=1):
     """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
     `dim` components are padded with zeros to three. `kernel`: physics.kernel; `density_diffusion`
     ("none" | "molteni" | "fourtakas") with coefficient `diffusion_delta` (fluid.density_diffusion);
     `gravity_on`: physics.gravity (the hydrostatic part of Fourtakas' diffusion needs it).
     `viscosity_model` ("laminar" | "artificial"; physics.viscosity_model): laminar takes `viscosity`
     (mu), artificial `alpha` (fluid.alpha; viscosity_coef = alpha c h, c = sqrt(stiffness));
-    `cfl_number`: 0.25 time.dt_fraction where time.dt = "adaptive" (then `dt` is the largest step)."""
+    `cfl_number`: 0.25 time.dt_fraction where time.dt = "adaptive" (then `dt` is the largest step).
+    The grid's cells are `cell_split` to the search's `reach` (h, or a reused list's; CELL_SPLIT)."""
     c = kernel_coefficients(h, dim, kernel)
     pad = lambda v: list(v) + [0.0] * (3 - len(v))  # noqa: E731
     params = np.zeros(1, PARAMS_DTYPE)
@@ -150,7 +151,7 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     p["stiffness"] = rest_density * stiffness / 7.0 if tait else stiffness
     p["dt"] = dt
     p["restitution"] = restitution
-    p["inv_cell"] = 1.0 / ((reach or h) * CELL_PADDING)  # cells of the search's reach: h (or a reused list's)
+    p["inv_cell"] = cell_split / ((reach or h) * CELL_PADDING)  # cell_split cells to the search's reach
     p["gravity"] = pad(gravity)
     p["box_min"] = pad(box_min)
     p["box_max"] = pad(box_max)

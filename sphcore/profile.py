@@ -77,26 +77,24 @@ def stage_bytes(stages, binds, sizes):
 
 def pair_tests(scene, position):
     """The candidate pairs one pair loop tests with the grid: for each particle, every particle in
-    the 3^dim cells around its own (the open domain's cells wrap; wall images not counted)."""
+    the (2 cell_split + 1)^dim cells around its own (the open domain's cells wrap; wall images not counted)."""
     if scene["physics.neighbour_search"] == "all_pairs":
         return len(position) ** 2
-    dims = np.array(scene.grid_dim[:scene.dim])
-    cell = np.floor((np.asarray(position, np.float64) - scene["domain.box_min"]) / (scene.h * (1 + 2.0**-12)))
+    dims, split = np.array(scene.grid_dim[:scene.dim]), scene.cell_split
+    cell = np.floor((np.asarray(position, np.float64) - scene["domain.box_min"]) / scene.cell_size)
     cell = cell.astype(np.int64)
     if scene["domain.boundary"] == "open":
         cell %= dims
     counts = np.zeros(dims)
     np.add.at(counts, tuple(np.clip(cell, 0, dims - 1).T), 1)
     around = np.zeros_like(counts)
-    for shift in np.ndindex(*(3,) * scene.dim):
+    for shift in np.ndindex(*(2 * split + 1,) * scene.dim):
         shifted = counts
         for axis, s in enumerate(shift):
-            if scene["domain.boundary"] == "open":
-                shifted = np.roll(shifted, s - 1, axis)
-            else:  # no wrap at walls: what rolls in from the far side is zeroed
-                shifted = np.roll(shifted, s - 1, axis)
+            shifted = np.roll(shifted, s - split, axis)
+            if scene["domain.boundary"] != "open":  # no wrap at walls: what rolls in from the far side is zeroed
                 edge = [slice(None)] * scene.dim
-                edge[axis] = 0 if s == 2 else -1 if s == 0 else slice(0, 0)
+                edge[axis] = slice(0, s - split) if s > split else slice(s - split, None) if s < split else slice(0, 0)
                 shifted = shifted.copy()
                 shifted[tuple(edge)] = 0
         around += shifted

@@ -12,11 +12,12 @@ from sphcore.simulation import Simulation, SimulationError
 BOX = 0.3
 
 
-def scene_for(dim, search="grid", boundary="walls", spacing=0.02):
+def scene_for(dim, search="grid", boundary="walls", spacing=0.02, ratio=2.0):
+    """A box of side BOX; h = ratio x spacing (from 3 x spacing on, cells of h / 2: Scene.cell_split)."""
     return Scene.from_dict({
         "physics": {"dimension": dim, "neighbour_search": search},
         "domain": {"box_min": [0.0] * dim, "box_max": [BOX] * dim, "boundary": boundary},
-        "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.1] * dim}], "spacing": spacing},
+        "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.1] * dim}], "spacing": spacing, "smoothing_ratio": ratio},
     })
 
 
@@ -56,9 +57,8 @@ def neighbour_fingerprints(x, ids, h, box_min, box_max, walls=True):
     return counts, prints
 
 
-def layouts(dim, h, rng):
-    """name -> positions (n, dim): the lattice jittered, and the adversarial cases."""
-    cell = h * (1 + 2.0**-12)
+def layouts(dim, cell, rng):
+    """name -> positions (n, dim): the lattice jittered, and the adversarial cases (`cell`: the grid's side)."""
     lattice = np.stack(np.meshgrid(*[np.arange(0.01, 0.11, 0.02)] * dim, indexing="ij"), -1).reshape(-1, dim)
     faces = np.stack(np.meshgrid(*[np.arange(0, 4) * cell] * dim, indexing="ij"), -1).reshape(-1, dim)
     return {
@@ -86,10 +86,13 @@ def stats_spec(scene):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("dim", [2, 3])
-def test_grid_neighbour_sets_equal_all_pairs_exactly(open_backend, backend, dim):
+@pytest.mark.parametrize("split", [1, 2])
+def test_grid_neighbour_sets_equal_all_pairs_exactly(open_backend, backend, dim, split):
+    """Split 2: h = 4 dx, cells of h / 2, the 5^dim cells around a particle's searched (Scene.cell_split)."""
     rng = np.random.default_rng(dim)
-    scene = scene_for(dim)
-    for name, x in layouts(dim, scene.h, rng).items():
+    scene = scene_for(dim, ratio=2.0 * split)
+    assert scene.cell_split == split and scene.spec.CELL_SPLIT == split
+    for name, x in layouts(dim, scene.cell_size, rng).items():
         x = np.clip(x, 0.0, BOX).astype(np.float32)
         params, state = load(scene, x)
         sim = open_backend(backend, params, state, plan(scene), stats_spec(scene))
@@ -105,9 +108,11 @@ def test_grid_neighbour_sets_equal_all_pairs_exactly(open_backend, backend, dim)
         sim.close()
 
 
-def test_open_domain_neighbour_sets_equal_all_pairs_exactly():
+@pytest.mark.parametrize("split", [1, 2])
+def test_open_domain_neighbour_sets_equal_all_pairs_exactly(split):
     """Hashed cells: particles a whole period apart share cells but are never counted together."""
-    scene = scene_for(3, boundary="open")
+    scene = scene_for(3, boundary="open", ratio=2.0 * split)
+    assert scene.cell_split == split
     rng = np.random.default_rng(7)
     x = rng.uniform(-0.5, 0.8, (300, 3)).astype(np.float32)  # over several hash periods
     params, state = load(scene, x)

@@ -33,21 +33,24 @@ def test_profile_times_every_stage_as_often_as_the_plan_runs_it(backend):
 
 
 @pytest.mark.parametrize("boundary", ["walls", "open"])
-def test_pair_tests_count_every_candidate_in_the_cells_around(boundary):
+@pytest.mark.parametrize("split", [1, 2])
+def test_pair_tests_count_every_candidate_in_the_cells_around(boundary, split):
     scene = Scene.from_dict({"domain": {"boundary": boundary, "box_max": [0.3, 0.2]},
-                             "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.3, 0.2]}]}})
+                             "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.3, 0.2]}],
+                                       "smoothing_ratio": 2.0 * split}})
+    assert scene.cell_split == split
     rng = np.random.default_rng(3)
     x = rng.uniform(0.0, 1.0, (300, 2)) * [0.3, 0.2]
     if boundary == "open":
         x[:50] += [0.9, -0.6]  # outside the period: hashed back into it
     dims = np.array(scene.grid_dim[:2])
-    cell = np.floor((x - scene["domain.box_min"]) / (scene.h * (1 + 2.0**-12))).astype(int)
+    cell = np.floor((x - scene["domain.box_min"]) / (scene.h * (1 + 2.0**-12) / split)).astype(int)
     if boundary == "open":
         cell %= dims
     d = np.abs(cell[:, None, :] - cell[None, :, :])
     if boundary == "open":
         d = np.minimum(d, dims - d)  # neighbouring across the period
-    assert pair_tests(scene, x) == int((d <= 1).all(axis=2).sum())
+    assert pair_tests(scene, x) == int((d <= split).all(axis=2).sum())
 
 
 def test_run_profile_prints_and_saves_the_table(tmp_path, capsys):

@@ -1,8 +1,8 @@
 // Neighbour-grid helpers shared by the grid and SPH shaders.
 // Mirror: sphcore/sph/cells.py (same names, same statements).
 //
-// Cells are cubes of side 1 / P.inv_cell (h, padded by 2^-12 so that rounding in the cell
-// coordinate can never put two particles closer than h more than one cell apart), counted from
+// Cells are cubes of side 1 / P.inv_cell (h / CELL_SPLIT, padded by 2^-12 so that rounding in the cell
+// coordinate can never put two particles closer than h more than CELL_SPLIT cells apart), counted from
 // P.box_min. With walls the grid covers the box; in an open domain cell coordinates wrap modulo
 // P.grid_dim (spatial hashing, seed 2): far-apart cells share a bucket, which is harmless because
 // every pair's distance is tested against h. The HistoPyramid over the per-cell counts has the
@@ -63,22 +63,25 @@ real3 reflected(real3 x, real3 wall, uint image) {
                  (image & 4u) != 0u ? 2.0 * wall.z - x.z : x.z);
 }
 
-// Ranges of sorted particles that hold the 3^dim cells around a cell: with walls the three
-// cells of an x-row are consecutive in the sorted order, so a row is one range (clipped to the
+// Ranges of sorted particles that hold the w^dim cells around a cell, w = 2 CELL_SPLIT + 1: with walls
+// the w cells of an x-row are consecutive in the sorted order, so a row is one range (clipped to the
 // box); in an open domain the hash may wrap a row, so each cell is a range of its own. Without
 // the grid, one range holds every particle.
 uint range_count() {
-    return GRID ? (WALLS ? (DIM == 3u ? 9u : 3u) : (DIM == 3u ? 27u : 9u)) : 1u;
+    uint w = 2u * CELL_SPLIT + 1u;
+    return GRID ? (WALLS ? (DIM == 3u ? w * w : w) : (DIM == 3u ? w * w * w : w * w)) : 1u;
 }
 
 // First and last cell of range k around cell `base`; false where the range is outside the box.
 bool range_cells(ivec3 base, uint k, out int first, out int last) {
-    uint row = WALLS ? k : k / 3u;
-    ivec3 c = base + ivec3(WALLS ? -1 : int(k % 3u) - 1, int(row % 3u) - 1, int(row / 3u) - (DIM == 3u ? 1 : 0));
+    uint w = 2u * CELL_SPLIT + 1u;
+    int s = int(CELL_SPLIT);
+    uint row = WALLS ? k : k / w;
+    ivec3 c = base + ivec3(WALLS ? -s : int(k % w) - s, int(row % w) - s, int(row / w) - (DIM == 3u ? s : 0));
     ivec3 c_last = c;
     if (WALLS) {
         c.x = max(c.x, 0);
-        c_last.x = min(c_last.x + 2, int(P.grid_dim.x) - 1);
+        c_last.x = min(c_last.x + 2 * s, int(P.grid_dim.x) - 1);
         if (c.x > c_last.x) return false;
     }
     first = cell_index(c);

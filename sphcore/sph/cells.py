@@ -49,7 +49,7 @@ def skin(spec, real=np.float32):
 
 @lru_cache(maxsize=None)
 def cells(spec, real=np.float32):
-    DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
+    DIM, GRID, WALLS, CELL_SPLIT = spec.DIM, spec.GRID, spec.WALLS, spec.CELL_SPLIT
 
     @njit
     def cell_of(P, x_x, x_y, x_z):
@@ -94,20 +94,24 @@ def cells(spec, real=np.float32):
 
     @njit
     def range_count():
-        """Ranges of sorted particles that hold the 3^dim cells around a cell (see cells.glsl)."""
-        return ((9 if DIM == 3 else 3) if WALLS else (27 if DIM == 3 else 9)) if GRID else 1
+        """Ranges of sorted particles that hold the w^dim cells around a cell, w = 2 CELL_SPLIT + 1 (see
+        cells.glsl)."""
+        w = 2 * CELL_SPLIT + 1
+        return ((w * w if DIM == 3 else w) if WALLS else (w * w * w if DIM == 3 else w * w)) if GRID else 1
 
     @njit
     def range_cells(P, base_x, base_y, base_z, k):
         """(inside, first, last): first and last cell of range k around cell `base`."""
-        row = k if WALLS else k // 3
-        c_x = base_x + (-1 if WALLS else k % 3 - 1)
-        c_y = base_y + row % 3 - 1
-        c_z = base_z + row // 3 - (1 if DIM == 3 else 0)
+        w = 2 * CELL_SPLIT + 1
+        s = CELL_SPLIT
+        row = k if WALLS else k // w
+        c_x = base_x + (-s if WALLS else k % w - s)
+        c_y = base_y + row % w - s
+        c_z = base_z + row // w - (s if DIM == 3 else 0)
         c_last_x = c_x
         if WALLS:
             c_x = max(c_x, 0)
-            c_last_x = min(c_last_x + 2, int(P.grid_dim[0]) - 1)
+            c_last_x = min(c_last_x + 2 * s, int(P.grid_dim[0]) - 1)
             if c_x > c_last_x:
                 return False, -1, -1
         first = cell_index(P, c_x, c_y, c_z)
