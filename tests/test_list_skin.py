@@ -49,6 +49,8 @@ ENGINEERING = {"kernel": "wendland_c2", "density": "continuity", "density_diffus
 SCENE_CONTINUITY = copy.deepcopy(SCENE)
 SCENE_CONTINUITY["physics"].update(ENGINEERING)
 SCENE_CONTINUITY["time"] = {"integrator": "verlet", "dt": "adaptive"}
+SCENE_CONTINUITY_4DX = copy.deepcopy(SCENE_CONTINUITY)  # (its support, 4 dx: cells of h / 2, Scene.cell_split)
+SCENE_CONTINUITY_4DX["fluid"]["smoothing_ratio"] = 4.0
 SCENE_CONTINUITY_3D = copy.deepcopy(SCENE_3D)
 SCENE_CONTINUITY_3D["physics"].update(ENGINEERING, density_diffusion="fourtakas")
 SCENE_CONTINUITY_3D["time"] = {"integrator": "verlet", "dt": "adaptive"}
@@ -109,8 +111,9 @@ def test_reused_lists_hold_every_pair_within_h_and_give_the_all_pairs_density(ba
         assert all(c[2] > len(x) / 2 for c in checked), checked  # (most lists overflowed)
 
 
-@pytest.mark.parametrize("base", [SCENE, SCENE_3D, SCENE_NARROW, SCENE_CONTINUITY, SCENE_CONTINUITY_3D],
-                         ids=["2d", "3d", "3d_narrow", "2d_continuity", "3d_continuity"])
+@pytest.mark.parametrize("base", [SCENE, SCENE_3D, SCENE_NARROW, SCENE_CONTINUITY, SCENE_CONTINUITY_4DX,
+                                  SCENE_CONTINUITY_3D],
+                         ids=["2d", "3d", "3d_narrow", "2d_continuity", "2d_continuity_4dx", "3d_continuity"])
 def test_reused_lists_give_the_states_of_lists_built_every_step(base):
     """The same pairs, summed in the build's order: in float64, 300 steps with lists reused end within 1e-9 m and
     1e-8 of the density of the run that sorts and builds every step (Vulkan: lavapipe builds float64 pipelines in
