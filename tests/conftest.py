@@ -85,15 +85,16 @@ def schedule_dependent(stage):
     return {"particle_slot", "sorted_index"} if stage.name == "scatter_particles" else {"particle_slot"}
 
 
-def assert_stage_agrees(a, b, stage, rtol):
-    """Two backends' buffers after `stage`: integers bitwise, reals within rtol of each buffer's scale."""
+def assert_stage_agrees(a, b, stage, rtol, least_scale=None):
+    """Two backends' buffers after `stage`: integers bitwise, reals within rtol of each buffer's scale, at least
+    least_scale[name] where given."""
     for name in a:
         if name in schedule_dependent(stage):
             continue
         if a[name].dtype.kind == "u":
             assert np.array_equal(a[name], b[name]), f"after {stage}: {name} differs"
             continue
-        scale = max(float(np.abs(a[name]).max(initial=0.0)), 1e-300)
+        scale = max(float(np.abs(a[name]).max(initial=0.0)), (least_scale or {}).get(name, 0.0), 1e-300)
         err = float(np.abs(a[name] - b[name]).max(initial=0.0))
         assert err <= rtol * scale, f"after {stage}: {name} differs by {err:g} (scale {scale:g})"
 
