@@ -42,6 +42,6 @@ layout(constant_id = 25) const bool LIST_CHUNKS = false;  // slot-major lists in
 layout(constant_id = 26) const uint LIST_SKIN = 0;        // the state equation's lists reused between builds: their
                                                           // skin in thousandths of h (physics.list_skin; 0: a list
                                                           // every step; cells.glsl: list_reach)
-layout(constant_id = 27) const uint CELL_SPLIT = 1;       // cells per search reach: 1, the (3)^dim cells around a
-                                                          // particle's searched, or 2, the (5)^dim of half the side
-                                                          // (Scene.cell_split: supports of 2.5 dx or more)
+layout(constant_id = 27) const uint CELL_SPLIT = 1;       // cells per search reach: 1 (a scan tests the 3^dim cells
+                                                          // around a particle's) or 2 (the 5^dim of half the side;
+                                                          // Scene.cell_split: supports of 2.5 dx or more)
