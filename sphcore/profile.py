@@ -91,10 +91,11 @@ def pair_tests(scene, position):
     for shift in np.ndindex(*(2 * split + 1,) * scene.dim):
         shifted = counts
         for axis, s in enumerate(shift):
-            shifted = np.roll(shifted, s - split, axis)
+            d = s - split
+            shifted = np.roll(shifted, d, axis)
             if scene["domain.boundary"] != "open":  # no wrap at walls: what rolls in from the far side is zeroed
                 edge = [slice(None)] * scene.dim
-                edge[axis] = slice(0, s - split) if s > split else slice(s - split, None) if s < split else slice(0, 0)
+                edge[axis] = slice(0, d) if d >= 0 else slice(d, None)
                 shifted = shifted.copy()
                 shifted[tuple(edge)] = 0
         around += shifted

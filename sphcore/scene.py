@@ -537,7 +537,10 @@ class Scene:
     @property
     def cell_size(self):
         """The neighbour grid's cells: the search's reach, padded (cells.glsl), over cell_split."""
-        return self.reach * CELL_PADDING / self.cell_split
+        return self._cell_size(self.cell_split)
+
+    def _cell_size(self, split):
+        return self.reach * CELL_PADDING / split
 
     @property
     def grid_dim(self):
@@ -549,7 +552,7 @@ class Scene:
         return self._grid_dim(self.cell_split)
 
     def _grid_dim(self, split):
-        size = self.reach * CELL_PADDING / split
+        size = self._cell_size(split)
         lo, hi = self["domain.box_min"], self["domain.box_max"]
         dims = [max(1, math.ceil((hi[a] - lo[a]) / size)) for a in range(self.dim)] + [1] * (3 - self.dim)
         if self["domain.boundary"] == "open":
