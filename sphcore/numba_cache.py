@@ -32,18 +32,30 @@ the launch and of every jitted function in its closure: functions of different c
 no longer share a name, and those that still do are the same function.
 
 Folder: $NUMBA_CACHE_DIR/sphcore where NUMBA_CACHE_DIR is set, else $SPHCORE_CACHE_DIR/numba,
-else ~/.cache/sphcore/numba (never inside the package, which may be installed read-only). Where
-the folder cannot be written, launches compile on every run, as without the cache.
+else ~/.cache/sphcore/numba (never inside the package, which may be installed read-only).
+
+The files are untrusted input (sphcore/cache_trust.py): loading a pickle runs code, so an index or
+entry is unpickled only from a folder and a file of this user's that no one else can write, and only
+after its header's hashes match its key (the index: its file name; an entry: the launch's file name,
+the source stamp, numba's version and the index key) and its bytes. A damaged entry is compiled again
+with one CacheWarning and replaced. Where the folder cannot be trusted, no entry is read or written;
+where it cannot be written, launches compile on every run: one CacheWarning, and the run goes on.
 """
 import hashlib
 import inspect
+import itertools
+import os
 import pickle
 from functools import lru_cache
+from pathlib import Path
 
 from numba.core import config
-from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
+from numba.core.caching import CompileResultCacheImpl, FunctionCache, IndexDataCacheFile, _CacheLocator
 
+from sphcore import cache_trust
 from sphcore.paths import PACKAGE_DIR, cache_dir
+
+LABEL = "numba cache"
 
 
 def cached(launch):
@@ -144,26 +156,113 @@ class MirrorLocator(_CacheLocator):
     def get_disambiguator(self):
         return self.fingerprint[:24]
 
+    def ensure_cache_path(self):
+        """Before a save: the folder (created again where it went) trusted and writable, else OSError."""
+        if not all(cache_trust.open_folder(self._path, Path(self._path).parent, LABEL)):
+            raise OSError(f"the {LABEL} {self._path} cannot be used")
+
     @classmethod
     def from_function(cls, py_func, py_file):
+        """The locator, or None (no cache: numba raises RuntimeError) where the folder cannot be trusted."""
         self = cls(py_func)
-        try:
-            self.ensure_cache_path()
-        except OSError:
-            return None
-        return self
+        readable, _ = cache_trust.open_folder(self._path, Path(self._path).parent, LABEL)
+        return self if readable else None
 
 
 class MirrorCacheImpl(CompileResultCacheImpl):
     _locator_classes = [MirrorLocator]
 
 
+class SealedCacheFile(IndexDataCacheFile):
+    """numba's index and data files, each sealed (sphcore/cache_trust.py) and unpickled only once their
+    file and header pass the checks. The index's key is its file name (numba's version and the source
+    stamp lead its payload, checked before unpickling: another's index is stale, not bad); an entry's key is
+    the file name, numba's version, the stamp and the index key, so an index never hands over another
+    launch's or another key's code. ".s1" in the names keeps numba's unsealed files (earlier versions) unread."""
+
+    def __init__(self, cache_path, filename_base, source_stamp):
+        super().__init__(cache_path, filename_base, source_stamp)
+        self._base = filename_base
+        self._index_path = os.path.join(cache_path, f"{filename_base}.s1.nbi")
+        self._data_name_pattern = f"{filename_base}.s1.{{number:d}}.nbc"
+        self._lead = f"{self._version}\0{source_stamp}\0".encode()
+
+    def _entry_key(self, key):
+        return f"{self._base}\0{self._version}\0{self._source_stamp}\0{key!r}"
+
+    def _warn(self, path, why):
+        cache_trust.warn_once(Path(path), f"ignored the cached machine code {path}: {why}; compiling it again")
+
+    def load(self, key):
+        name = self._load_index().get(key)
+        if name is None:
+            return None
+        path = self._data_path(name)
+        try:
+            payload = cache_trust.read_entry(path, self._entry_key(key))
+            return None if payload is None else pickle.loads(payload)
+        except cache_trust.BadEntry as e:
+            self._warn(path, e)
+        except Exception as e:  # sealed, yet does not unpickle (e.g. a module it names went)
+            self._warn(path, f"it does not load ({type(e).__name__}: {e})")
+        return None
+
+    def save(self, key, data):
+        """The entry first, then the index naming it (each replaced atomically)."""
+        overloads = self._load_index()
+        name = overloads.get(key)
+        if name is None:
+            existing = set(overloads.values())
+            name = next(n for n in map(self._data_name, itertools.count(1)) if n not in existing)
+        cache_trust.write_entry(self._data_path(name), self._entry_key(key), self._dump(data))
+        if overloads.get(key) != name:
+            self._save_index({**overloads, key: name})
+
+    def _load_index(self):
+        try:
+            payload = cache_trust.read_entry(self._index_path, self._base)
+        except cache_trust.BadEntry as e:
+            self._warn(self._index_path, e)
+            return {}
+        if payload is None or not payload.startswith(self._lead):
+            return {}  # none, or another numba's or another source's (stale: replaced at the next save)
+        try:
+            return pickle.loads(payload[len(self._lead):])
+        except Exception as e:
+            self._warn(self._index_path, f"it does not load ({type(e).__name__}: {e})")
+            return {}
+
+    def _save_index(self, overloads):
+        cache_trust.write_entry(self._index_path, self._base, self._lead + self._dump(overloads))
+
+
 class MirrorCache(FunctionCache):
+    """numba's cache of one launch, in sealed files (SealedCacheFile); where an entry cannot be loaded or
+    saved, the launch compiles and the run goes on (a CacheWarning)."""
+
     _impl_class = MirrorCacheImpl
 
     def __init__(self, dispatcher):
         super().__init__(dispatcher.py_func)
+        self._cache_file = SealedCacheFile(self._cache_path, self._impl.filename_base,
+                                           self._impl.locator.get_source_stamp())
         self._options = repr(sorted(dispatcher.targetoptions.items()))
+
+    def load_overload(self, sig, target_context):
+        try:
+            return super().load_overload(sig, target_context)
+        except Exception as e:  # a sealed entry that numba cannot rebuild
+            cache_trust.warn_once(Path(self._cache_path) / self._impl.filename_base,
+                                  f"the cached machine code {self._impl.filename_base} in {self._cache_path} does "
+                                  f"not load ({type(e).__name__}: {e}); compiling it again")
+            return None
+
+    def save_overload(self, sig, data):
+        try:
+            super().save_overload(sig, data)
+        except OSError as e:
+            cache_trust.warn_once(Path(self._cache_path), f"cannot write to the {LABEL} {self._cache_path} ({e}); "
+                                                          f"compiled code is not kept")
 
     def _index_key(self, sig, codegen):
         return (sig, codegen.magic_tuple(), self._impl.locator.fingerprint, self._options, config.BOUNDSCHECK)
