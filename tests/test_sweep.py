@@ -134,7 +134,7 @@ def test_sweep_command_errors_are_one_line(tmp_path, capsys):
         sweep.run_sweep(tmp_path, points=[at(**TINY)], scheduler="tcp://127.0.0.1:9", timeout=1)
     (tmp_path / "sweep.json").write_text("{not json")
     assert main(["sweep", "--out", str(tmp_path), "--quick"]) == 1
-    assert "sweep.json: not a sweep table" in capsys.readouterr().err
+    assert "sweep.json: not valid JSON" in capsys.readouterr().err
     assert (tmp_path / "sweep.json").read_text() == "{not json"  # kept as it was
 
 

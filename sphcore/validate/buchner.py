@@ -53,6 +53,7 @@ from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError, stable_dt
 from sphcore.signals import Interrupted, Signals
 from sphcore.validate import DATA_DIR, configs
+from sphcore.validate.files import read_csv, read_json
 from sphcore.validate.sensors import wall_pressure
 
 G = 9.81
@@ -328,9 +329,7 @@ def run_buchner(settings=None, out_dir=None, progress=True):
 def read_results(out_dir, name="dam_break_pressure"):
     """(rows, summary) as write_results wrote them."""
     out = Path(out_dir)
-    with (out / f"{name}.csv").open(encoding="utf-8") as f:
-        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
-    return rows, json.loads((out / f"{name}.json").read_text(encoding="utf-8"))
+    return read_csv(out / f"{name}.csv", numbers="all"), read_json(out / f"{name}.json")
 
 
 def clean(value):

@@ -9,7 +9,6 @@ list of dicts or a CSV becomes a table, a JSON dict a table of its keys, a PNG a
 part not found says "not run" and names the command that makes it. Then the versions and the
 hardware. Pictures are copied next to index.html, so the folder is the whole report.
 """
-import csv
 import html
 import json
 import math
@@ -23,6 +22,7 @@ from importlib import metadata
 from pathlib import Path
 
 from sphcore.output import atomic_write_bytes
+from sphcore.validate.files import ResultsError, check, check_png, read_csv, read_json, unreadable
 
 REPO = Path(__file__).resolve().parent.parent.parent
 # prefix -> (title, the command that writes its files); read generically
@@ -32,6 +32,9 @@ OTHER_SECTIONS = {
     "stability": ("Stability at the extremes", "sphcore validate stability --out {dir}"),
 }
 PACKAGES = ("numpy", "numba", "vulkan", "matplotlib", "dask", "distributed", "tqdm")
+SUMMARY_NUMBERS = ("rms_Z_table2", "rms_Z_table2_unshifted", "gate_shift_T", "best_shift_T_table2", "particles",
+                   "steps", "dt", "wall_s")  # of dam_break_2d.json, where present
+PLOT_COLUMNS = ("T", "Z", "tau", "H")  # of dam_break_2d.csv, for its picture
 SWEEP_COLUMNS = ("point", "varied", "backend", "resolution", "dt_fraction", "precision", "equation_of_state", "stiffness",
                  "neighbour_search", "alpha", "config", "t_end", "status", "dtype", "device", "particles", "steps", "dt", "wall_s",
                  "steps_per_s", "rms_Z_table2", "rms_Z_table2_unshifted", "best_shift_T_table2", "error")
@@ -88,20 +91,6 @@ def render_json(value):
     return f"<pre>{esc(json.dumps(value, indent=1))}</pre>"
 
 
-def read_csv(path):
-    """Rows of a CSV with numbers as floats (ints where whole), empty cells as None."""
-    def number(text):
-        if text == "":
-            return None
-        try:
-            value = float(text)
-        except ValueError:
-            return text
-        return int(value) if value.is_integer() and "." not in text and "e" not in text.lower() else value
-    with open(path, newline="", encoding="utf-8") as f:
-        return [{k: number(v) for k, v in row.items()} for row in csv.DictReader(f)]
-
-
 def shown(path):
     """`path` relative to the current folder where it lies below it (a report made in a checkout
     names validation/results, not the checkout's absolute path)."""
@@ -118,16 +107,19 @@ class Page:
 
     def __init__(self, out, dirs):
         self.out, self.dirs, self.parts = out, dirs, []
+        self.skipped = []  # (path, why) of JSON files found by summaries() that could not be read
 
     def find(self, name):
         return next((d / name for d in self.dirs if (d / name).is_file()), None)
 
     def matching(self, prefix, suffixes=(".json", ".csv", ".png")):
-        names = {p.name for d in self.dirs if d.is_dir() for p in d.glob(f"{prefix}*") if p.suffix in suffixes}
+        names = {p.name for d in self.dirs if d.is_dir() for p in d.glob(f"{prefix}*")
+                 if p.suffix in suffixes and p.is_file()}  # not a folder or a dangling link of that name
         return [self.find(n) for n in sorted(names)]
 
     def image(self, path, alt=""):
-        """An <img> of `path`, copied next to index.html when it lies elsewhere."""
+        """An <img> of `path` (checked to be a whole PNG), copied next to index.html when it lies elsewhere."""
+        check_png(path)
         target = self.out / path.name
         if path.resolve() != target.resolve():
             shutil.copyfile(path, target)
@@ -155,7 +147,7 @@ class Page:
                 if p.suffix == ".png":
                     out.append(self.image(p))
                 elif p.suffix == ".json":
-                    out.append(f"<p>From {self.link(p)}:</p>" + render_json(json.loads(p.read_text())))
+                    out.append(f"<p>From {self.link(p)}:</p>" + render_json(read_json(p, None)))
                 elif any(q.suffix == ".json" for q in group):
                     out.append(f"<p>The series as CSV: {self.link(p)}</p>")
                 else:
@@ -177,16 +169,20 @@ def dam_break_2d(page, settings=None):
     from sphcore.validate import dam_break
 
     found = page.find("dam_break_2d.json")
+    png = page.find("dam_break_2d.png")
     if found is None:
         rows, summary = dam_break.run_dam_break(settings, page.out)
         note = f"<p>Run by this report into {page.link(page.out)} (no dam_break_2d.json was there).</p>"
         csv_path = page.out / "dam_break_2d.csv"
     else:
-        summary = json.loads(found.read_text())
+        summary = check(found, read_json(found), numbers=SUMMARY_NUMBERS, dicts=("settings",))
         csv_path = found.with_suffix(".csv")
-        rows = read_csv(csv_path) if csv_path.is_file() else None
+        rows = read_csv(csv_path, numbers=() if png else PLOT_COLUMNS) if csv_path.is_file() else None
         note = f"<p>Read from {page.link(found)}.</p>"
-    png = page.find("dam_break_2d.png")
+        if png is None and rows:  # what the picture needs: its title and legend
+            check(found, summary, required=("particles", "gate_shift_T", "rms_Z_table2", "settings"))
+            check(found, summary["settings"], required=("dimension", "resolution", "equation_of_state", "precision",
+                                                        "backend"))
     if png is None and rows:
         png = dam_break.plot(rows, summary, page.out / "dam_break_2d.png")
     errors = [{"series": label, "RMS of Z (T + gate shift)": summary.get(f"rms_Z_{name}"),
@@ -198,7 +194,7 @@ def dam_break_2d(page, settings=None):
             "<h3>Errors against the measured fronts</h3>", table(errors),
             f"<p>Gate: {'met' if (summary.get('rms_Z_table2') or math.inf) <= 0.15 else 'not met'} "
             f"(RMS against Table 2 <= 0.15).</p>",
-            "<h3>Run</h3>", key_values(run), "<h3>Settings</h3>", key_values(summary.get("settings", {}))]
+            "<h3>Run</h3>", key_values(run), "<h3>Settings</h3>", key_values(summary.get("settings") or {})]
     if rows:
         body.append(details(f"dam_break_2d.csv: {len(rows)} rows", table(rows)))
     others = [d / "dam_break_2d.json" for d in page.dirs if (d / "dam_break_2d.json").is_file()][1:]
@@ -209,8 +205,8 @@ def dam_break_2d(page, settings=None):
 
 def other_run(path):
     """A row of the settings and errors of the 2D run summarised in `path`."""
-    summary = json.loads(path.read_text())
-    s = summary.get("settings", {})
+    summary = check(path, read_json(path), dicts=("settings",))
+    s = summary.get("settings") or {}
     return {"folder": shown(path.parent), **{k: s.get(k) for k in ("backend", "resolution", "precision",
                                                                    "equation_of_state", "dt_fraction")},
             **{k: summary.get(k) for k in ("device", "particles", "steps", "wall_s", "rms_Z_table2",
@@ -227,19 +223,22 @@ def sweep_section(page):
         return
     meta = {}
     if source.suffix == ".json":
-        data = json.loads(source.read_text())
-        rows, meta = data["rows"], data.get("sweep", {})
+        data = check(source, read_json(source), required=("rows",), lists=("rows",), dicts=("sweep",))
+        rows, meta = data["rows"], data.get("sweep") or {}
+        if not all(isinstance(r, dict) for r in rows):
+            raise unreadable(source, "'rows' is not an array of objects")
     else:
         rows = read_csv(source)
     body = [f"<p>Read from {page.link(source)}: {len(rows)} points, "
             f"{sum(r.get('status') == 'ok' for r in rows)} ok.</p>"]
     rec_path = page.find("recommendations.json")
     if rec_path is not None:
-        rec = json.loads(rec_path.read_text())
+        rec = check(rec_path, read_json(rec_path), dicts=("cheapest_meeting_threshold", "most_accurate"),
+                    lists=("text",))
         picks = [{"which": name.replace("_", " "), **rec[name]} for name in ("cheapest_meeting_threshold", "most_accurate")
                  if rec.get(name)]
         body += ["<h3>Recommendations</h3>", table(picks, ["which", "label", "rms_Z_table2", "wall_s", "point"]),
-                 "<pre>" + esc("\n".join(rec.get("text", []))) + "</pre>"]
+                 "<pre>" + esc("\n".join(map(str, rec.get("text") or []))) + "</pre>"]
     else:
         body.append(page.missing("sphcore sweep --out {dir}").replace("not run", "recommendations.json missing"))
     pareto = page.find("pareto.png")
@@ -254,7 +253,8 @@ def sweep_section(page):
 
 def summaries(page):
     """Every run summary (a JSON dict with "settings") in the results folders and their subfolders,
-    each file once: [(path, summary)]."""
+    each file once: [(path, summary)]. A JSON file that cannot be read, or a summary whose settings are
+    not of their kinds, is left out and listed in page.skipped (the page says so)."""
     seen, out = set(), []
     for d in page.dirs:
         if not d.is_dir():
@@ -265,11 +265,13 @@ def summaries(page):
                 continue
             seen.add(key)
             try:
-                data = json.loads(path.read_text())
-            except (OSError, ValueError):
-                continue
-            if isinstance(data, dict) and isinstance(data.get("settings"), dict):
-                out.append((path, data))
+                data = read_json(path, None)
+                if isinstance(data, dict) and isinstance(data.get("settings"), dict):
+                    check(path, data["settings"], numbers=("resolution", "spacing", "dimension", "dt_fraction"),
+                          texts=("config", "backend"))
+                    out.append((path, check(path, data, texts=("error",))))
+            except ResultsError as e:  # any JSON below the folders is scanned: say which were not read
+                page.skipped.append((path, e.why))
     return out
 
 
@@ -304,7 +306,8 @@ def front_convergence(runs):
     for path, summary in runs:
         s = summary["settings"]
         csv_path = Path(path).with_suffix(".csv")
-        if "rms_Z_table2" in summary and not summary.get("error") and csv_path.is_file():
+        if ("rms_Z_table2" in summary and not summary.get("error") and csv_path.is_file()
+                and isinstance(s.get("resolution"), (int, float))):
             key = (s.get("config") or "graphics", s.get("dimension") or 2)
             groups.setdefault(key, {})[s.get("resolution")] = (csv_path, s.get("backend"))
     rows = []
@@ -313,7 +316,7 @@ def front_convergence(runs):
             continue
         series = {}
         for resolution in sorted(found):
-            data = read_csv(found[resolution][0])
+            data = read_csv(found[resolution][0], numbers=("T", "Z"), min_rows=1)
             series[resolution] = (np.array([r["T"] for r in data], float), np.array([r["Z"] for r in data], float))
         T = np.linspace(0.0, min(t[-1] for t, _ in series.values()), 200)
         Z = {res: np.interp(T, t, z) for res, (t, z) in series.items()}
@@ -360,7 +363,7 @@ def model_section(page):
                 value = summary.get(key)
                 row[column] = value * scale if isinstance(value, (int, float)) else None
             row["wall s"] = summary.get("wall_s")
-            row["stopped"] = (summary.get("error") or "").split(";")[0][:90] or ""
+            row["stopped"] = (summary.get("error") or "").split(";")[0][:90]
             row["file"] = shown(path)
             rows.append(row)
         if not rows:
@@ -378,6 +381,7 @@ def model_section(page):
         for r in rows:
             png = Path(r["file"]).with_suffix(".png")
             if png.is_file() and case != "Martin & Moyce 1952 (front Z)":
+                check_png(png)
                 target = page.out / f"{png.parent.name}_{png.name}"
                 if png.resolve() != target.resolve():
                     shutil.copyfile(png, target)
@@ -387,6 +391,9 @@ def model_section(page):
             body.append(details(f"{len(pictures)} pictures", "\n".join(pictures)))
     if not found:
         body.append(page.missing("sphcore validate dam-break-pressure --out {dir} [--config engineering]"))
+    if page.skipped:
+        body.append("<p>JSON files under the results folders not read: " + "; ".join(
+            f"{page.link(p)}: {esc(why)}" for p, why in page.skipped) + ".</p>")
     body.append("<p>Martin &amp; Moyce's residual column H is not compared: no measured H series is carried in "
                 "validation/data (the front Z is).</p>")
     page.add("model", "The model: today's against the recommended (issue 12)", "\n".join(body))
@@ -513,6 +520,10 @@ def build_report(out, results=None, settings=None, argv=None):
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     dirs = [Path(results)] if isinstance(results, (str, Path)) else [Path(r) for r in results or ()]
+    for d in dirs:  # a typo would otherwise run the dam break into DIR and report that
+        if not d.is_dir():
+            raise ResultsError(f"--results {d}: {'not a folder' if d.exists() else 'no such folder'} (it takes a "
+                               "folder the validation commands wrote into)")
     if out.resolve() not in [d.resolve() for d in dirs]:
         dirs.append(out)
     page = Page(out, dirs)

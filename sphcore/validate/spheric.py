@@ -59,6 +59,7 @@ import numpy as np
 
 from sphcore.scene import Scene
 from sphcore.validate import DATA_DIR, configs
+from sphcore.validate.files import read_csv, read_json
 
 G = 9.81
 TANK = (3.22, 1.0, 1.0)  # x along, y up, z across
@@ -239,9 +240,7 @@ def write_results(rows, summary, out_dir):
 def read_results(out_dir):
     """(rows, summary) as write_results wrote them (for plotting a run made elsewhere)."""
     out = Path(out_dir)
-    with (out / "spheric_test2.csv").open(encoding="utf-8") as f:
-        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
-    return rows, json.loads((out / "spheric_test2.json").read_text(encoding="utf-8"))
+    return read_csv(out / "spheric_test2.csv", numbers="all"), read_json(out / "spheric_test2.json")
 
 
 def plot(rows, summary, path):

@@ -16,20 +16,25 @@ compile-time choices in the same worker: numba compiles each specialization once
 CPU time (cpu_s) and the machine's load average (load_1min) are recorded beside it: on a
 shared machine they say how far wall_s can be trusted.
 """
+import contextlib
 import csv
 import io
 import json
 import logging
 import math
 import os
+import signal
 import socket
+import threading
 import time
 from pathlib import Path
 
 from sphcore.output import atomic_savefig, atomic_write_bytes
+from sphcore.signals import Interrupted
 from sphcore.simulation import SimulationError
 from sphcore.validate.configs import CONFIGS, RECOMMENDED_CONFIG
 from sphcore.validate.dam_break import SETTINGS
+from sphcore.validate.files import check, read_json, unreadable
 
 AXES = ("backend", "resolution", "dt_fraction", "precision", "equation_of_state", "stiffness",
         "neighbour_search", "alpha", "config")
@@ -203,19 +208,24 @@ def write_table(out, rows, meta):
     atomic_write_bytes(Path(out) / "sweep.json", json.dumps(clean({"sweep": meta, "rows": rows}), indent=1).encode())
 
 
+POINT_NUMBERS = ("resolution", "dt_fraction", "stiffness", "alpha", "t_end")
+ROW_TEXTS = ("status", "error", "dtype", "device", "host")  # the other result columns are numbers
+
+
 def read_table(out):
-    """(rows, meta) of DIR/sweep.json, ([], {}) where there is none."""
+    """(rows, meta) of DIR/sweep.json, ([], {}) where there is none; ResultsError naming the file
+    and what is wrong with it where it is not a sweep table (it is left as it is)."""
     path = Path(out) / "sweep.json"
-    if not path.is_file():
+    if not path.exists():
         return [], {}
-    try:
-        data = json.loads(path.read_text())
-        rows, meta = data["rows"], data["sweep"]
-        rows = [{**DEFAULT, **{k: (math.nan if v is None else v) for k, v in r.items()}} for r in rows]
-    except (ValueError, KeyError, TypeError, AttributeError) as e:
-        raise SweepError(f"{path}: not a sweep table ({type(e).__name__}: {e}); move it away or choose another "
-                         "--out") from None
-    return rows, meta
+    data = check(path, read_json(path), required=("rows", "sweep"), lists=("rows",), dicts=("sweep",))
+    for i, r in enumerate(data["rows"]):  # the values the design compares and sorts
+        if not isinstance(r, dict):
+            raise unreadable(path, f"row {i} is not an object")
+        check(f"{path}, row {i}", r, numbers=POINT_NUMBERS + tuple(k for k in RESULT_COLUMNS if k not in ROW_TEXTS),
+              texts=ROW_TEXTS + tuple(k for k in POINT_KEYS if k not in POINT_NUMBERS))
+    rows = [{**DEFAULT, **{k: (math.nan if v is None else v) for k, v in r.items()}} for r in data["rows"]]
+    return rows, data["sweep"]
 
 
 # ---- the Pareto front and the recommendations ----
@@ -445,6 +455,21 @@ def write_outputs(out, rows):
 
 # ---- execution ----
 
+@contextlib.contextmanager
+def sigint_ignored():
+    """SIGINT ignored for the block (main thread; elsewhere nothing changes). Ctrl-C at a terminal
+    reaches every process of its group: the Dask workers started in this block inherit the
+    disposition, so only this process hears it and closes the cluster (no worker tracebacks); and
+    closing, or writing the last tables, is not cut short by a second Ctrl-C."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+
+
 def local_cluster(workers):
     """A LocalCluster of `workers` processes, one task each, the cores shared out as numba threads
     (measured on 2 cores: one worker with 2 threads steps as many points per second as two with
@@ -462,8 +487,9 @@ def connect(scheduler, workers, timeout=10):
     from distributed import Client
 
     if scheduler is None:
-        cluster = local_cluster(workers or 1)
-        return Client(cluster), cluster
+        with sigint_ignored():  # the workers ignore Ctrl-C; a Ctrl-C while they start is lost
+            cluster = local_cluster(workers or 1)
+            return Client(cluster), cluster
     try:
         return Client(scheduler, timeout=timeout), None
     except (OSError, ValueError, TypeError) as e:
@@ -491,7 +517,8 @@ def run_sweep(out, points=None, scheduler=None, workers=None, quick=False, backe
     Points already in DIR/sweep.json with status "ok" are kept and not run again (rows there
     that this design does not have are kept too, numbered after it); every result is written
     as it arrives; pareto.png and recommendations.* are written at the end, or when the sweep
-    is interrupted, from what there is."""
+    is interrupted, from what there is. Ctrl-C stops the cluster quietly and raises Interrupted
+    saying how many points are done; the same call runs the rest."""
     if scheduler is not None and workers is not None:
         raise SweepError("--workers sizes the local cluster; with --scheduler the scheduler's workers run the points")
     out = Path(out)
@@ -503,6 +530,7 @@ def run_sweep(out, points=None, scheduler=None, workers=None, quick=False, backe
     if earlier:  # how the rows kept from an earlier sweep into DIR ran
         meta["earlier_runs"] = earlier.pop("earlier_runs", []) + [earlier]
     client = cluster = None
+    rows, total = {}, None
     try:
         if points is None:
             on_cpu = True
@@ -517,18 +545,24 @@ def run_sweep(out, points=None, scheduler=None, workers=None, quick=False, backe
         extra = [r for r in previous if point_key(r) not in set(keys)]
         rows.update({len(points) + j: {**r, "point": len(points) + j} for j, r in enumerate(extra)})
         todo = [(i, p) for i, p in enumerate(points) if i not in rows]
-        meta["points"] = len(points)
+        meta["points"] = total = len(points)
         meta["reused"] = len(points) - len(todo)
         if todo and client is None:
             client, cluster = connect(scheduler, workers, timeout)
         if client is not None:
             meta["workers"] = len(client.scheduler_info()["workers"])
         run_points(client, todo, rows, out, meta, progress)
+    except KeyboardInterrupt:
+        ok = sum(r.get("status") == "ok" for i, r in rows.items() if total is None or i < total)
+        done = f"{ok} of {total} points done" if total else "before the points were made"
+        kept = f", written to {out}/sweep.csv and sweep.json" if rows else ""
+        raise Interrupted(signal.SIGINT, f"interrupted; {done}{kept} (the same command runs the rest)") from None
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with sigint_ignored():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
     return sorted(rows.values(), key=lambda r: r["point"])
 
 
@@ -557,5 +591,6 @@ def run_points(client, todo, rows, out, meta, progress):
         meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S %z")
         meta["elapsed_s"] = time.perf_counter() - started
         if rows:
-            write_table(out, rows.values(), meta)
-            write_outputs(out, list(rows.values()))
+            with sigint_ignored():
+                write_table(out, rows.values(), meta)
+                write_outputs(out, list(rows.values()))
