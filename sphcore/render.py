@@ -2,7 +2,9 @@
 
 `render_run(run_dir, out_dir)` takes every snapshot of a 3D run, extracts the surface
 (`particle_surface`: the isosurface of the colour field), and writes next to each other
-<name>_<step>.png and <name>_<step>.vtp (or .ply), the camera fixed for the whole run.
+<name>_surface_<step>.png and <name>_surface_<step>.vtp (or .ply), the camera fixed for the whole
+run, and <name>_surface.pvd, which gives ParaView each mesh's time. These names never are a run's
+(its snapshots are <name>_<step>.vtp): an out_dir where one would be is refused.
 
 Offscreen: with no X display, VTK is pointed at its EGL render window (Mesa's llvmpipe through
 EGL's surfaceless platform: apt packages libegl1, libegl-mesa0, libgl1-mesa-dri; no GPU and no
@@ -11,7 +13,9 @@ X server needed), unless VTK_DEFAULT_OPENGL_WINDOW is already set.
 import json
 import os
 import re
+import sys
 import xml.etree.ElementTree as ET
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +86,17 @@ def render_mesh(verts, faces, normals, png_path, particles=None, box=None, camer
     and lit with its own vertex normals, optionally `particles` (N, 3) as small points, the
     outline of `box` = (box_min, box_max), and `text` at the top left, from `camera` (pyvista's
     (position, focal point, view up); None: box_camera of `box`, else fitted to the mesh), and
-    write the screenshot to `png_path` atomically. An empty surface draws the rest."""
+    write the screenshot to `png_path` atomically. An empty surface draws the rest.
+
+    >>> import os, tempfile, numpy as np, sphcore
+    >>> z, y, x = np.mgrid[-1:1:16j, -1:1:16j, -1:1:16j]
+    >>> verts, faces, normals = sphcore.marching_cubes(x**2 + y**2 + z**2, level=0.5)
+    >>> png = os.path.join(tempfile.mkdtemp(), "sphere.png")
+    >>> sphcore.render_mesh(verts, faces, normals, png, box=((0, 0, 0), (15, 15, 15)), window_size=(320, 240)).name
+    'sphere.png'
+    >>> open(png, "rb").read(4)[1:]  # a PNG file's signature
+    b'PNG'
+    """
     import pyvista as pv
 
     mesh = surface_mesh(verts, faces, normals)
@@ -117,49 +131,174 @@ def render_mesh(verts, faces, normals, png_path, particles=None, box=None, camer
         pl.close()
 
 
-def load_run(run_dir):
-    """(scene, snapshot paths in step order) of a run folder, or SceneError saying what is missing."""
+def read_scene(run_dir):
+    """The scene of a run folder, from its scene.json or else its final.npz, or SceneError naming
+    the file and what is wrong with it (missing, truncated, not sphcore's)."""
     from sphcore.scene import Scene, SceneError
+
+    run_dir = Path(run_dir)
+    if (run_dir / "scene.json").is_file():
+        source = run_dir / "scene.json"
+        try:
+            text = source.read_text(encoding="utf-8")
+            data = json.loads(text)
+        except (OSError, ValueError) as e:  # unreadable, not UTF-8, not JSON
+            raise SceneError(f"{source}: not a readable scene ({str(e)[:200]})") from None
+    elif (run_dir / "final.npz").is_file():
+        source = run_dir / "final.npz"
+        try:
+            with np.load(source) as npz:
+                data = json.loads(str(npz["scene"]))
+        except KeyError:
+            raise SceneError(f"{source}: holds no scene, so it is no final state of a sphcore run") from None
+        except ValueError as e:  # object arrays (sphcore never writes them), or not JSON
+            raise SceneError(f"{source}: not a final state of a sphcore run (its scene is not readable: "
+                             f"{type(e).__name__})") from None
+        except (OSError, EOFError, zipfile.BadZipFile) as e:
+            raise SceneError(f"{source}: not a readable final state, truncated or not an .npz "
+                             f"({str(e)[:200]})") from None
+    else:
+        raise SceneError(f"{run_dir}: no scene.json or final.npz, so no scene to render; is it a `sphcore run` folder?")
+    if not isinstance(data, dict):
+        raise SceneError(f"{source}: not a scene (a JSON {type(data).__name__}, not a table)")
+    return Scene.from_dict(data, str(source))
+
+
+def read_pvd(pvd):
+    """[(file name, time)] of a .pvd's data sets, or SceneError naming the file (truncated, not XML,
+    a time that is no number)."""
+    from sphcore.scene import SceneError
+
+    try:
+        root = ET.parse(pvd).getroot()
+        return [(ds.get("file", ""), float(ds.get("timestep", "nan"))) for ds in root.iter("DataSet")]
+    except (OSError, ET.ParseError, ValueError) as e:
+        raise SceneError(f"{pvd}: not a readable .pvd series ({str(e)[:200]})") from None
+
+
+def snapshot_step(path):
+    """The step of a snapshot NAME_NNNNNNN.vtp (-1 for any other name)."""
+    m = re.search(r"_(\d+)\.vtp$", Path(path).name)
+    return int(m.group(1)) if m else -1
+
+
+def load_run(run_dir):
+    """(scene, snapshot paths in step order, file name -> time) of a run folder, or SceneError saying
+    what is missing or unreadable. Snapshots its .pvd lists that are gone are left out, with a note."""
+    from sphcore.scene import SceneError
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise SceneError(f"{run_dir}: no such run folder (`sphcore run SCENE --out {run_dir}` writes one)")
-    if (run_dir / "scene.json").is_file():
-        source = run_dir / "scene.json"
-        text = source.read_text(encoding="utf-8")
-    elif (run_dir / "final.npz").is_file():
-        source = run_dir / "final.npz"
-        with np.load(source) as data:
-            text = str(data["scene"])
-    else:
-        raise SceneError(f"{run_dir}: no scene.json or final.npz, so no scene to render; is it a `sphcore run` folder?")
-    scene = Scene.from_dict(json.loads(text), str(source))
+    scene = read_scene(run_dir)
     if scene.dim != 3:
         raise SceneError(f"{run_dir}: {scene['name']} is a 2D run; `sphcore render` draws 3D surfaces, "
                          f"use `sphcore plot {run_dir}` for 2D")
-
-    def step(path):
-        m = re.search(r"_(\d+)\.vtp$", path.name)
-        return int(m.group(1)) if m else -1
-
     pvd = run_dir / f"{scene['name']}.pvd"
+    times = dict(read_pvd(pvd)) if pvd.is_file() else {}
     if pvd.is_file():
-        files = [run_dir / ds.get("file", "") for ds in ET.parse(pvd).getroot().iter("DataSet")]
-    else:
-        files = list(run_dir.glob(f"{scene['name']}_*.vtp"))
-    files = sorted({f for f in files if f.is_file() and step(f) >= 0}, key=step)
+        files = [run_dir / name for name in times]
+    else:  # NAME_NNNNNNN.vtp, not NAME_surface_NNNNNNN.vtp
+        snapshot = re.compile(re.escape(scene["name"]) + r"_\d+\.vtp")
+        files = [f for f in run_dir.glob(f"{scene['name']}_*.vtp") if snapshot.fullmatch(f.name)]
+    gone = [f.name for f in files if not f.is_file()]
+    if gone:
+        print(f"sphcore render: note: {pvd} lists {len(gone)} snapshot(s) that are gone ({gone[0]}"
+              f"{', ...' if len(gone) > 1 else ''}); rendering the others", file=sys.stderr)
+    files = sorted({f for f in files if f.is_file() and snapshot_step(f) >= 0}, key=snapshot_step)
     if not files:
         raise SceneError(f"{run_dir}: no snapshots ({scene['name']}_<step>.vtp) to render")
-    return scene, files
+    return scene, files, times
+
+
+def read_positions(path):
+    """Particle positions (N, 3) float32 of a .vtp snapshot, or SceneError naming the file: a truncated
+    or garbled file, or one with fewer points than its header says."""
+    import pyvista as pv
+    from pyvista.core.utilities import VtkErrorCatcher
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    from sphcore.scene import SceneError
+
+    try:  # the whole XML first: VTK reads a truncated file as an empty one with only a log message
+        piece = ET.parse(path).getroot().find("PolyData/Piece")
+        n = int(piece.get("NumberOfPoints"))
+    except (OSError, ET.ParseError, AttributeError, TypeError, ValueError) as e:
+        raise SceneError(f"{path}: not a readable snapshot, truncated or not a .vtp ({str(e)[:200]})") from None
+    try:
+        reader = vtkXMLPolyDataReader()  # not pv.read: its own observer logs VTK's errors and warns
+        reader.SetFileName(str(path))
+        with pv.vtk_verbosity("off"), VtkErrorCatcher(raise_errors=True, send_to_logging=False):
+            reader.Update()
+        points = np.asarray(pv.wrap(reader.GetOutput()).points, np.float32).reshape(-1, 3)
+    except Exception as e:  # VTK's errors, raised by the catcher: say the first one, less its source line
+        lines = [s for s in str(e).splitlines() if s.strip() and not s.startswith("ERROR: In ")] or [type(e).__name__]
+        what = re.sub(r"^vtk\w+ \(0x[0-9a-f]+\): ", "", lines[0])[:200]
+        raise SceneError(f"{path}: not a readable snapshot ({what})") from None
+    if points.shape != (n, 3):
+        raise SceneError(f"{path}: not a readable snapshot: {len(points)} points where its header says {n}")
+    return points
+
+
+def check_complete(path):
+    """SceneError naming a snapshot that does not end in </VTKFile> (a truncated file): checked for
+    every snapshot before the first frame is drawn, the whole file only when it is read."""
+    from sphcore.scene import SceneError
+
+    try:
+        with open(path, "rb") as f:
+            f.seek(max(f.seek(0, os.SEEK_END) - 64, 0))
+            complete = f.read().rstrip().endswith(b"</VTKFile>")
+    except OSError as e:
+        raise SceneError(f"{path}: not a readable snapshot ({e.strerror or e})") from None
+    if not complete:
+        raise SceneError(f"{path}: not a readable snapshot, truncated (it does not end in </VTKFile>)")
+
+
+def surface_name(scene_name, snapshot):
+    """The stem of the surface of snapshot NAME_NNNNNNN.vtp: NAME_surface_NNNNNNN (never a run's name)."""
+    return f"{scene_name}_surface_{snapshot_step(snapshot):07d}"
+
+
+def refuse_clash(out_dir, names):
+    """SceneError (one line) if a file `names` would give in out_dir is, or will be, a run's: one that
+    out_dir's run manifest lists, or a name a run of the scene in out_dir/scene.json writes."""
+    from sphcore.folder import listed, names_of_run
+    from sphcore.scene import SceneError
+
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        return
+    theirs = listed(out_dir) or set()
+    try:
+        of_run = names_of_run(json.loads((out_dir / "scene.json").read_text(encoding="utf-8"))["name"])
+    except (OSError, ValueError, KeyError, TypeError):
+        of_run = lambda name: False  # noqa: E731 (no run's scene there)
+    clash = sorted(name for name in names if name in theirs or of_run(name))
+    if clash:
+        raise SceneError(f"{out_dir}: holds a run whose file names `sphcore render` would write over "
+                         f"({clash[0]}{' and more' if len(clash) > 1 else ''}); give another --out")
+
+
+def write_pvd(path, entries):
+    """A .pvd series of [(file name, time)], atomically."""
+    root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
+    collection = ET.SubElement(root, "Collection")
+    for name, t in entries:
+        ET.SubElement(collection, "DataSet", timestep=repr(float(t)), group="", part="0", file=name)
+    data = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    return replace_into(path, lambda tmp: Path(tmp).write_bytes(data))
 
 
 def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, particles=False, every=1,
                mesh_format="vtp", progress=True):
-    """Surface mesh and picture of every `every`-th snapshot of a 3D run: out_dir/<snapshot>.png
-    and .vtp or .ply (points, triangles wound outwards, point normals "Normals"), from one camera
-    fixed by the scene's box. `spacing` (default h / 2) and `level` go to particle_surface.
+    """Surface mesh and picture of every `every`-th snapshot NAME_NNNNNNN.vtp of a 3D run:
+    out_dir/NAME_surface_NNNNNNN.png and .vtp or .ply (points, triangles wound outwards, point
+    normals "Normals"), from one camera fixed by the scene's box, and (vtp, where the run's .pvd
+    gives the snapshots' times) out_dir/NAME_surface.pvd listing each mesh with its time, rewritten
+    after each frame. `spacing` (default h / 2) and `level` go to particle_surface. An out_dir
+    holding a run whose files these names would replace is refused before anything is written.
     Returns the paths written, in order."""
-    import pyvista as pv
     from tqdm import tqdm
 
     from sphcore.surface import particle_surface
@@ -168,34 +307,39 @@ def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, parti
         raise ValueError(f"mesh_format must be vtp or ply, got {mesh_format!r}")
     if every < 1:
         raise ValueError(f"every must be >= 1, got {every}")
-    scene, snapshots = load_run(run_dir)
-    times = snapshot_times(Path(run_dir) / f"{scene['name']}.pvd")
+    scene, snapshots, times = load_run(run_dir)
+    snapshots = snapshots[::every]
+    for path in snapshots:
+        check_complete(path)
+    name = scene["name"]
+    stems = [surface_name(name, path) for path in snapshots]
+    series = f"{name}_surface.pvd"
     out_dir = Path(out_dir)
+    refuse_clash(out_dir, [series] + [f"{s}.{ext}" for s in stems for ext in (mesh_format, "png")])
     out_dir.mkdir(parents=True, exist_ok=True)
     box = (np.array(scene["domain.box_min"], float), np.array(scene["domain.box_max"], float))
     gravity = np.array(scene["forces.gravity"], float) if scene["physics.gravity"] else np.zeros(3)
     up = -gravity / np.linalg.norm(gravity) if np.linalg.norm(gravity) > 0 else (0.0, 1.0, 0.0)
     window = (1024, 768)
     camera = box_camera(*box, up=up, aspect=window[0] / window[1])
-    written = []
-    for path in tqdm(snapshots[::every], unit="frame", disable=not progress, desc=f"render {scene['name']}"):
-        position = np.asarray(pv.read(path).points, np.float32)
+    written, entries = [], []
+    for path, stem in tqdm(list(zip(snapshots, stems)), unit="frame", disable=not progress, desc=f"render {name}"):
+        position = read_positions(path)
         if len(position):
             verts, faces, normals = particle_surface(scene, position, spacing=spacing, level=level, backend=backend)
         else:  # no fluid left: an empty mesh and a picture of the box
             verts, faces, normals = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32)
         mesh = surface_mesh(verts, faces, normals)
-        written.append(replace_into(out_dir / f"{path.stem}.{mesh_format}", lambda tmp: mesh.save(str(tmp))))
+        written.append(replace_into(out_dir / f"{stem}.{mesh_format}", lambda tmp: mesh.save(str(tmp))))
         t = times.get(path.name)
-        text = f"{scene['name']}  t = {t:.4g} s" if t is not None else f"{scene['name']}  {path.stem}"
-        written.append(render_mesh(verts, faces, normals, out_dir / f"{path.stem}.png",
+        text = f"{name}  t = {t:.4g} s" if t is not None else f"{name}  {path.stem}"
+        written.append(render_mesh(verts, faces, normals, out_dir / f"{stem}.png",
                                    particles=position if particles else None, box=box, camera=camera,
                                    window_size=window, text=text))
+        if mesh_format == "vtp" and t is not None:
+            entries.append((f"{stem}.vtp", t))
+            write_pvd(out_dir / series, entries)
+    if entries:
+        written.append(out_dir / series)
     return written
 
-
-def snapshot_times(pvd):
-    """file name -> time, from a .pvd ({} if there is none)."""
-    if not Path(pvd).is_file():
-        return {}
-    return {ds.get("file"): float(ds.get("timestep", "nan")) for ds in ET.parse(pvd).getroot().iter("DataSet")}

@@ -367,6 +367,15 @@ def marching_cubes(volume, level=None, spacing=(1.0, 1.0, 1.0), backend="numba",
     backend: "numba" (the mirrors, on the CPU) or "vulkan"; method: "histopyramid" or "per_cube";
     midpoint: vertices at edge midpoints instead of linear interpolation; forward_normals:
     normals by forward instead of central differences.
+
+    >>> import numpy as np, sphcore
+    >>> z, y, x = np.mgrid[-1:1:24j, -1:1:24j, -1:1:24j]  # 24^3 samples, spacing 2/23
+    >>> verts, faces, normals = sphcore.marching_cubes(x**2 + y**2 + z**2, level=0.5)
+    >>> verts.shape[1], faces.dtype, len(faces) > 1000
+    (3, dtype('int32'), True)
+    >>> radius = np.linalg.norm(verts * (2 / 23) - 1, axis=1)  # the sphere of radius sqrt(0.5)
+    >>> bool(abs(radius - 0.5 ** 0.5).max() < 0.01)
+    True
     """
     volume = np.asarray(volume)
     check_shape(volume.shape)
@@ -386,14 +395,24 @@ def marching_cubes(volume, level=None, spacing=(1.0, 1.0, 1.0), backend="numba",
 
 
 def sample_grid(position, h, spacing, box=None):
-    """(origin, shape) of a grid of `spacing` over the particles' bounding box grown by h and one
-    spacing on every side (so the surface closes inside it), clipped to `box` (walls)."""
+    """(origin, shape, spacing per axis) of a grid over the particles' bounding box grown by h and one
+    spacing on every side, so the surface closes inside it. With walls, `box` = (box_min, box_max):
+    the grid stops one sample beyond each wall, its spacing per axis is the largest at most
+    `spacing` that divides the box, and its samples sit at the centres of those cells of the box,
+    so that each wall lies halfway between two samples, where the surface closes (sample_field:
+    the field is 0 beyond the walls, about 1 inside them with the particles' wall images)."""
     lo = position.min(axis=0) - (h + spacing)
     hi = position.max(axis=0) + (h + spacing)
-    if box is not None:
-        lo, hi = np.maximum(lo, box[0]), np.minimum(hi, box[1])
-    shape = np.maximum(np.ceil((hi - lo) / spacing).astype(int) + 1, 2)
-    return lo, tuple(int(k) for k in shape)
+    if box is None:
+        shape = np.maximum(np.ceil((hi - lo) / spacing).astype(int) + 1, 2)
+        return lo, tuple(int(k) for k in shape), (spacing,) * 3
+    box_min, box_max = np.asarray(box[0], float), np.asarray(box[1], float)
+    cells = np.maximum(np.ceil((box_max - box_min) / spacing * (1 - 1e-9)), 1).astype(int)
+    step = (box_max - box_min) / cells
+    # sample k at box_min + (k - 1/2) step, k = 0 .. cells + 1 (0 and cells + 1: beyond the walls)
+    first = np.clip(np.floor((lo - box_min) / step + 0.5), 0, cells).astype(int)
+    last = np.clip(np.ceil((hi - box_min) / step + 0.5), first + 1, cells + 1).astype(int)
+    return box_min + (first - 0.5) * step, tuple(int(k) for k in last - first + 1), tuple(float(s) for s in step)
 
 
 def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", method="histopyramid",
@@ -401,8 +420,18 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
     """The fluid's surface (verts, faces, normals) in scene coordinates: the isosurface at `level` of
     the colour field sum_j m / rho_j W(x - x_j) (sample_field), sampled every `spacing`
     (default h / 2) over the particles' bounding box. The particles are sorted into the
-    neighbour grid and their densities computed by the scene's own stages first. With
-    `with_field`, also returns (volume, origin, spacing)."""
+    neighbour grid and their densities computed by the scene's own stages first. With walls the
+    field counts the particles' wall images and the surface closes at the walls (sample_grid), so
+    a fluid against a wall has no hole there. With `with_field`, also returns (volume, origin,
+    spacing per axis).
+
+    >>> import sphcore
+    >>> scene = sphcore.Scene.from_dict({"physics": {"dimension": 3}, "fluid": {
+    ...     "spacing": 0.05, "blocks": [{"min": [0.2, 0.2, 0.2], "max": [0.6, 0.6, 0.6]}]}})
+    >>> verts, faces, normals = sphcore.particle_surface(scene, scene.initial_positions())
+    >>> len(faces) > 0, bool(verts.min() > 0.0) and bool(verts.max() < 1.0)  # a skin around the cube
+    (True, True)
+    """
     from sphcore.backends import Stage, empty_state, make_backend, neighbour_stages
 
     if scene.dim != 3:
@@ -431,10 +460,10 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
     finally:
         sorter.close()
     box = (np.array(scene["domain.box_min"]), np.array(scene["domain.box_max"])) if walls else None
-    origin, shape = sample_grid(position, scene.h, spacing, box)
+    origin, shape, spacing = sample_grid(position, scene.h, spacing, box)
     sph = params.copy()[0]  # sample_field sums poly6 (h^2 - r^2)^3: its coefficient, whatever the scene's kernel
     sph["density_coef"] = scene.mass * kernel_coefficients(scene.h, 3)["poly6"]
-    with Extractor(shape, (spacing,) * 3, origin, backend=backend, method=method, particles=len(position),
+    with Extractor(shape, spacing, origin, backend=backend, method=method, particles=len(position),
                    cells=cells, sph=sph, spec=spec, device=device) as extractor:
         volume = extractor.field(sorted_state["particle_x"], sorted_state["particle_rho"],
                                  sorted_state["cell_pyramid"], sorted_state["cell_start"])

@@ -9,8 +9,8 @@ import pytest
 pv = pytest.importorskip("pyvista")
 
 from sphcore.cli import SCENE_DIR, main  # noqa: E402
-from sphcore.render import BACKGROUND, render_mesh, render_run  # noqa: E402
-from sphcore.scene import Scene  # noqa: E402
+from sphcore.render import BACKGROUND, read_positions, render_mesh, render_run  # noqa: E402
+from sphcore.scene import Scene, SceneError  # noqa: E402
 from sphcore.surface import marching_cubes  # noqa: E402
 
 W, H = 400, 300
@@ -144,32 +144,76 @@ def test_render_cli(droplet_run, tmp_path, capsys):
     pvd = ET.parse(run / "droplet_3d.pvd").getroot()
     stems = [ds.get("file")[:-4] for ds in pvd.iter("DataSet")]
     assert stems == ["droplet_3d_0000000", "droplet_3d_0000002"]
+    times = [float(ds.get("timestep")) for ds in pvd.iter("DataSet")]
+    surfaces = ["droplet_3d_surface_0000000", "droplet_3d_surface_0000002"]
     scene = Scene.from_dict(json.loads((run / "scene.json").read_text()))
 
     out = run_cli(capsys, "render", run, "--out", run / "frames")
     assert "2 frames" in out and len(out.strip().splitlines()) == 1
     frames = run / "frames"
-    assert sorted(p.name for p in frames.iterdir()) == sorted([f"{s}.png" for s in stems] + [f"{s}.vtp" for s in stems])
-    check_meshes([frames / f"{s}.vtp" for s in stems], scene)
-    for s in stems:
+    assert sorted(p.name for p in frames.iterdir()) == sorted(
+        [f"{s}.png" for s in surfaces] + [f"{s}.vtp" for s in surfaces] + ["droplet_3d_surface.pvd"])
+    check_meshes([frames / f"{s}.vtp" for s in surfaces], scene)
+    # the meshes' series gives ParaView each mesh's time: its snapshot's, from the run's .pvd
+    series = ET.parse(frames / "droplet_3d_surface.pvd").getroot()
+    assert [(ds.get("file"), float(ds.get("timestep"))) for ds in series.iter("DataSet")] == [
+        (f"{s}.vtp", t) for s, t in zip(surfaces, times)]
+    assert times[1] > times[0]
+    for s in surfaces:
         img = read_png(frames / f"{s}.png")
         assert img.shape == (768, 1024, 3)
         fg = foreground(img)
         assert 0.01 < fg.mean() < 0.5
     # the camera is fixed: two frames of an (almost) unchanged droplet are (almost) the same picture
-    a, b = (foreground(read_png(frames / f"{s}.png")) for s in stems)
+    a, b = (foreground(read_png(frames / f"{s}.png")) for s in surfaces)
     assert np.mean(a != b) < 0.01
 
-    # ply, every 2nd snapshot, particles drawn
+    # ply, every 2nd snapshot, particles drawn; no .pvd (ParaView's series reader takes VTK XML files)
     run_cli(capsys, "render", run, "--out", tmp_path / "ply", "--format", "ply", "--every", "2", "--particles")
-    assert sorted(p.name for p in (tmp_path / "ply").iterdir()) == [f"{stems[0]}.ply", f"{stems[0]}.png"]
-    check_meshes([tmp_path / "ply" / f"{stems[0]}.ply"], scene)
+    assert sorted(p.name for p in (tmp_path / "ply").iterdir()) == [f"{surfaces[0]}.ply", f"{surfaces[0]}.png"]
+    check_meshes([tmp_path / "ply" / f"{surfaces[0]}.ply"], scene)
+
+
+def test_render_into_the_run_folder_leaves_the_run_alone(droplet_run, tmp_path):
+    """The meshes' names are never the run's (NAME_NNNNNNN.vtp, NAME.pvd): rendered into a copy of the
+    run's folder, every file of the run keeps its bytes."""
+    import shutil
+    run = tmp_path / "run"
+    shutil.copytree(droplet_run, run, ignore=shutil.ignore_patterns("frames"))
+    before = {p.name: p.read_bytes() for p in run.iterdir()}
+    written = render_run(run, run, every=2, progress=False)
+    assert [p.name for p in written] == ["droplet_3d_surface_0000000.vtp", "droplet_3d_surface_0000000.png",
+                                         "droplet_3d_surface.pvd"]
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.name in before} == before
+    assert pv.read(run / "droplet_3d_0000000.vtp").n_verts == pv.read(run / "droplet_3d_0000000.vtp").n_points > 0
+    # without the run's .pvd the snapshots are found by name, the meshes beside them not taken for
+    # snapshots; no times, so no series of the meshes
+    (run / "droplet_3d.pvd").unlink()
+    written = render_run(run, tmp_path / "again", progress=False)
+    assert [p.name for p in written] == ["droplet_3d_surface_0000000.vtp", "droplet_3d_surface_0000000.png",
+                                         "droplet_3d_surface_0000002.vtp", "droplet_3d_surface_0000002.png"]
+
+
+def test_render_refuses_an_out_holding_a_run_of_those_names(droplet_run, tmp_path):
+    """An --out holding a run named droplet_3d_surface, whose snapshots and series are named as the
+    droplet's meshes are: refused in one line naming the folder and a name, before anything is written."""
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "scene.json").write_text(json.dumps({**json.loads((droplet_run / "scene.json").read_text()),
+                                                  "name": "droplet_3d_surface"}))
+    (other / "droplet_3d_surface_0000000.vtp").write_bytes(b"the other run's snapshot")
+    with pytest.raises(SceneError, match=r"other: holds a run .*droplet_3d_surface.*give another --out") as e:
+        render_run(droplet_run, other, progress=False)
+    assert "\n" not in str(e.value)
+    assert sorted(p.name for p in other.iterdir()) == ["droplet_3d_surface_0000000.vtp", "scene.json"]
+    assert (other / "droplet_3d_surface_0000000.vtp").read_bytes() == b"the other run's snapshot"
 
 
 def test_render_run_empty_surface(droplet_run, tmp_path):
     """A level the colour field never reaches: empty meshes and pictures of the box, no crash."""
     written = render_run(droplet_run, tmp_path, level=10.0, every=2, progress=False)
-    assert [p.name for p in written] == ["droplet_3d_0000000.vtp", "droplet_3d_0000000.png"]
+    assert [p.name for p in written] == ["droplet_3d_surface_0000000.vtp", "droplet_3d_surface_0000000.png",
+                                         "droplet_3d_surface.pvd"]
     assert pv.read(written[0]).n_points == 0
     assert 0 < foreground(read_png(written[1])).mean() < 0.05
 
@@ -200,3 +244,42 @@ def test_render_errors(droplet_run, tmp_path, capsys):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert "no scene.json" in error_line(capsys, "render", empty)
+
+
+def test_render_damaged_inputs_name_the_file(droplet_run, tmp_path, capsys):
+    """A truncated final.npz (the only scene), one of random bytes, a truncated snapshot, a truncated
+    .pvd: each a one-line error naming the file, and no output written."""
+    import shutil
+    only_final = tmp_path / "only_final"
+    only_final.mkdir()
+    np.savez(only_final / "whole.npz", scene=np.array((droplet_run / "scene.json").read_text()),
+             x=np.zeros((1000, 3)))
+    data = (only_final / "whole.npz").read_bytes()
+    (only_final / "whole.npz").unlink()
+    (only_final / "final.npz").write_bytes(data[:len(data) // 2])
+    err = error_line(capsys, "render", only_final, "--out", tmp_path / "o1")
+    assert f"{only_final / 'final.npz'}: not a readable final state" in err
+    (only_final / "final.npz").write_bytes(np.random.default_rng(0).bytes(4000))
+    err = error_line(capsys, "render", only_final, "--out", tmp_path / "o1")
+    assert str(only_final / "final.npz") in err and "allow_pickle" not in err
+
+    run = tmp_path / "run"
+    shutil.copytree(droplet_run, run, ignore=shutil.ignore_patterns("frames"))
+    snapshot = run / "droplet_3d_0000002.vtp"
+    snapshot.write_bytes(snapshot.read_bytes()[:3000])
+    err = error_line(capsys, "render", run, "--out", tmp_path / "o2")
+    assert f"{snapshot}: not a readable snapshot, truncated" in err
+    assert not (tmp_path / "o2").exists()  # found before the first frame was drawn
+    snapshot.write_bytes(b"<VTKFile>" + b"\x00" * 100 + b"</VTKFile>")  # complete, but garbage
+    with pytest.raises(SceneError, match=f"{snapshot}: not a readable snapshot"):
+        read_positions(snapshot)
+    snapshot.write_text('<VTKFile type="PolyData" version="1.0"><PolyData><Piece NumberOfPoints="5">'
+                        '</Piece></PolyData></VTKFile>')  # well-formed, but no points where it says 5
+    with pytest.raises(SceneError, match=f"{snapshot}: not a readable snapshot \\(.*Points") as e:
+        read_positions(snapshot)
+    assert "\n" not in str(e.value) and "0x" not in str(e.value)  # VTK's first error, without its source line
+    pvd = run / "droplet_3d.pvd"
+    pvd.write_bytes(pvd.read_bytes()[:100])
+    err = error_line(capsys, "render", run, "--out", tmp_path / "o3")
+    assert f"{pvd}: not a readable .pvd series" in err
+    assert not (tmp_path / "o3").exists()
