@@ -1,8 +1,8 @@
 """Command line: `sphcore run SCENE`, `sphcore run --resume RUN_DIR`, `sphcore keys`, `sphcore plot RUN_DIR`,
 `sphcore render RUN_DIR`."""
 import argparse
+import json
 import math
-import zipfile
 import os
 import signal
 import sys
@@ -17,7 +17,24 @@ def printable(message):
     return "".join(c if c.isprintable() or c == "\n" else repr(c)[1:-1] for c in str(message))
 
 
+def differences(given, stored, source, most=2):
+    """'key: x in SOURCE, y in the run' for the first `most` dotted keys whose values differ."""
+    found = []
+
+    def walk(a, b, where):
+        if isinstance(a, dict) and isinstance(b, dict):
+            for name in sorted(set(a) | set(b)):
+                walk(a.get(name), b.get(name), f"{where}.{name}" if where else name)
+        elif a != b:
+            found.append(f"{where}: {json.dumps(a)} in {source}, {json.dumps(b)} in the run")
+
+    walk(given, stored, "")
+    more = f" and {len(found) - most} more key(s)" if len(found) > most else ""
+    return "; ".join(found[:most]) + more
+
+
 def cmd_run(args):
+    from sphcore import folder
     from sphcore.scene import Scene
     from sphcore.simulation import CheckpointError, load_checkpoint, run
 
@@ -28,13 +45,17 @@ def cmd_run(args):
         stored, checkpoint = load_checkpoint(out)
         if scene is not None and scene.config != stored.config:
             raise CheckpointError(f"{args.scene} is not the scene of the run in {out} (its scene.json): "
+                                  f"{differences(scene.config, stored.config, args.scene)}; "
                                   f"leave SCENE out to continue that run")
         scene = stored
     else:
         out = Path(args.out or Path("runs") / scene["name"])
     backend = args.backend or (str(checkpoint["backend"]) if checkpoint is not None else "numba")
     options = {"local_size": args.local_size}
-    if args.profile:
+    if args.profile:  # a profile.json of someone else's stops the run before it starts, not after
+        if (out / "profile.json").exists() and "profile.json" not in (folder.listed(out) or ()):
+            raise folder.FolderError(f"{out / 'profile.json'}: a file no sphcore run wrote (no {folder.MANIFEST} "
+                                     "lists it); --profile never replaces it: move it away, or give another --out")
         from sphcore.profile import Profile
         options["profile"] = Profile()
     if backend == "vulkan":
@@ -43,8 +64,11 @@ def cmd_run(args):
                  **options)
     resumed = f" (resumed at step {int(checkpoint['step'])})" if checkpoint is not None else ""
     if args.profile:
-        from sphcore.profile import report
-        print(report(options["profile"], scene, arrays["position"], out))
+        from sphcore.profile import work
+        per_stage, pairs = work(scene, arrays["position"])
+        with folder.RunFolder(out) as run_folder:  # profile.json is the run's: listed in its manifest
+            run_folder.write_bytes("profile.json", options["profile"].to_json(per_stage, pairs).encode())
+        print(options["profile"].table(per_stage, pairs))
     builds = f", neighbour lists built {int(arrays['list_builds'])} times" if "list_builds" in arrays else ""
     print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed}{builds}, "
           f"t = {float(arrays['time']):.4g} s -> {out}/final.npz, {out}/{scene['name']}.pvd")
@@ -64,17 +88,16 @@ def cmd_keys(args):
 
 
 def cmd_plot(args):
-    from sphcore.plot import plot_state
+    from sphcore.plot import check_target, plot_state
     from sphcore.scene import SceneError
 
     final = Path(args.run_dir) / "final.npz"
+    if args.out:  # the picture's path first: a missing folder is its fault, not final.npz's
+        check_target(args.out)
     if not final.is_file():
         raise SceneError(f"{final}: no such file; `sphcore run` writes it when a run completes "
                          "(a run that stopped early keeps its snapshots, *.vtp)")
-    try:
-        out = plot_state(final, args.out)
-    except (OSError, ValueError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as e:  # truncated, objects
-        raise SceneError(f"{final}: not a readable final state ({str(e)[:200]})") from None
+    out = plot_state(final, args.out)  # a damaged final.npz or a path it must not write: SceneError
     print(f"wrote {out}")
 
 
@@ -83,13 +106,20 @@ def cmd_render(args):
         import pyvista  # noqa: F401
     except ImportError:
         sys.exit("sphcore: error: `sphcore render` needs pyvista: pip install -e '.[render]'")
+    from sphcore import folder
     from sphcore.render import render_run
     from sphcore.scene import SceneError
 
     out = Path(args.out or Path(args.run_dir) / "render")
+    if out.is_dir() and (out.resolve() == Path(args.run_dir).resolve() or (out / folder.MANIFEST).is_file()):
+        raise SceneError(f"--out {out}: a run's folder; `sphcore render` writes its meshes and pictures into a "
+                         f"folder of their own, apart from the run's files: give another --out "
+                         f"(default {Path(args.run_dir) / 'render'})")
     try:
         written = render_run(args.run_dir, out, backend=args.backend, spacing=args.spacing, level=args.level,
                              particles=args.particles, every=args.every, mesh_format=args.format)
+    except SceneError:  # render's own one-line errors name their file already
+        raise
     except ValueError as e:  # e.g. a --spacing so fine that the sample grid is too large
         raise SceneError(f"{args.run_dir}: {e}") from None
     print(f"wrote {len(written) // 2} frames ({args.format} meshes and PNGs) to {out}")
@@ -97,6 +127,7 @@ def cmd_render(args):
 
 def main(argv=None):
     from sphcore import __version__
+    from sphcore.folder import MANIFEST, PATTERNS
 
     parser = argparse.ArgumentParser(prog="sphcore", description=__doc__)
     parser.add_argument("--version", action="version", version=f"sphcore {__version__}")
@@ -115,7 +146,9 @@ def main(argv=None):
     p.add_argument("--profile", action="store_true",
                    help="time every stage of the step (Vulkan: GPU timestamps) and write RUN_DIR/profile.json")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace the run already in --out (its checkpoint, snapshots and final state are deleted)")
+                   help=f"replace the run already in --out: the files its manifest ({MANIFEST}) lists are deleted, "
+                        f"only under a run's names ({PATTERNS}); files it did not write are kept, and a file of "
+                        "those names that no manifest lists stops the run"),
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("keys", help="list every scene key with its default, unit and range")
     p.add_argument("section", nargs="?", help="only this table's keys (physics, domain, fluid, forces, walls, time)")

@@ -21,24 +21,38 @@ _VTK_TYPES = {
 
 
 @contextlib.contextmanager
-def atomic_file(path):
+def atomic_file(path, dir_fd=None, before_rename=None):
     """An open binary file whose content replaces `path` all at once when the block ends without
     an error: written under a temporary name in the same folder (os.replace is only atomic within
     one file system), flushed to disk, then renamed over `path`. On an error (or a signal) the
-    temporary file is removed and `path` keeps its old content."""
+    temporary file is removed and `path` keeps its old content.
+
+    With `dir_fd` (an open folder, sphcore.folder.RunFolder), `path` is a name in that folder and
+    every step goes through the descriptor: the file lands in that folder even where its path has
+    come to name another. `before_rename()` (a check that may raise) runs just before the rename."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    opener = None if dir_fd is None else (lambda name, flags: os.open(name, flags, 0o666, dir_fd=dir_fd))
     try:
-        with open(tmp, "wb") as f:
+        with open(tmp, "wb", opener=opener) as f:
             yield f
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        if before_rename is not None:
+            before_rename()
+        if dir_fd is None:
+            os.replace(tmp, path)
+        else:
+            os.replace(tmp, path, src_dir_fd=dir_fd, dst_dir_fd=dir_fd)
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp, dir_fd=dir_fd)
         raise
     # Best effort: make the rename itself durable (POSIX only; directories can't be opened on Windows).
-    if hasattr(os, "O_DIRECTORY"):
+    if dir_fd is not None:
+        with contextlib.suppress(OSError):
+            os.fsync(dir_fd)
+    elif hasattr(os, "O_DIRECTORY"):
         try:
             fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
             try:
@@ -169,15 +183,31 @@ def write_vtp(path, position, point_data) -> None:
 class SnapshotSeries:
     """Numbered .vtp snapshots in `out_dir` plus `{name}.pvd` listing them for ParaView.
 
-    An existing .pvd is loaded on creation, so a resumed run appends to the earlier series."""
+    An existing .pvd is loaded on creation, so a resumed run appends to the earlier series. With
+    `folder` (the run's sphcore.folder.RunFolder) every file goes through it, and only what its
+    manifest lists is taken from the folder: a .pvd or a .vtp of someone else's is never adopted
+    into the series (nor replaced: the run is refused).
 
-    def __init__(self, out_dir, name):
+    >>> import tempfile, numpy as np, sphcore
+    >>> series = sphcore.SnapshotSeries(tempfile.mkdtemp(), "demo")
+    >>> x, rho = np.zeros((3, 2), np.float32), np.full(3, 1000.0, np.float32)
+    >>> series.add(0, 0.0, x, {"density": rho}).name
+    'demo_0000000.vtp'
+    >>> _ = series.add(10, 0.01, x, {"density": rho})
+    >>> [f.name for f in series.files], series.pvd_path.name  # what ParaView opens: demo.pvd
+    (['demo_0000000.vtp', 'demo_0000010.vtp'], 'demo.pvd')
+    """
+
+    def __init__(self, out_dir, name, folder=None):
         self.out_dir = Path(out_dir)
         self.name = name
+        self.folder = folder
         self.pvd_path = self.out_dir / f"{name}.pvd"
         self._entries = {}  # file name relative to out_dir -> (step, time)
-        if self.pvd_path.exists():
+        if self.pvd_path.exists() and (folder is None or self.pvd_path.name in folder.names):
             for ds in ET.parse(self.pvd_path).getroot().iter("DataSet"):
+                if folder is not None and ds.get("file") not in folder.names:
+                    continue  # not a snapshot of this run's
                 m = re.search(r"_(\d+)\.vtp$", ds.get("file", ""))
                 step = int(m.group(1)) if m else -1  # foreign entries sort first
                 self._entries[ds.get("file")] = (step, float(ds.get("timestep", "0")))
@@ -187,11 +217,18 @@ class SnapshotSeries:
         self._order = sorted(self._entries, key=lambda f: self._entries[f])
         self.files = [self.out_dir / f for f in self._order]
 
+    def _open(self, fname):
+        """An atomic_file for out_dir/`fname`, through the run's folder where there is one."""
+        if self.folder is not None:
+            return self.folder.open(fname)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        return atomic_file(self.out_dir / fname)
+
     def add(self, step: int, time: float, position, point_data) -> Path:
         """Write snapshot `step`, then rewrite the .pvd; re-adding a step replaces its entry."""
-        self.out_dir.mkdir(parents=True, exist_ok=True)
         fname = f"{self.name}_{step:07d}.vtp"
-        write_vtp(self.out_dir / fname, position, point_data)
+        with self._open(fname) as f:
+            write_vtp_to(f, position, point_data)
         self._entries[fname] = (int(step), float(time))
         self._update_files()
         self._write_pvd()
@@ -199,8 +236,9 @@ class SnapshotSeries:
 
     def truncate(self, step: int) -> None:
         """Drop the snapshots after `step` from the .pvd, then delete their files (only files named
-        NAME_NNNNNNN.vtp in out_dir): a run resumed from a checkpoint at `step` continues the series
-        from there, and one resumed to fewer steps keeps none of the later ones."""
+        NAME_NNNNNNN.vtp in out_dir, and with a folder only those its manifest lists): a run resumed
+        from a checkpoint at `step` continues the series from there, and one resumed to fewer steps
+        keeps none of the later ones."""
         later = [f for f, (s, _) in self._entries.items() if s > step]
         if not later:
             return
@@ -210,7 +248,10 @@ class SnapshotSeries:
         self._write_pvd()
         for f in later:
             if re.fullmatch(rf"{re.escape(self.name)}_\d{{7}}\.vtp", f):
-                (self.out_dir / f).unlink(missing_ok=True)
+                if self.folder is not None:
+                    self.folder.remove(f)
+                else:
+                    (self.out_dir / f).unlink(missing_ok=True)
 
     def _write_pvd(self):
         root = ET.Element("VTKFile", type="Collection", version="1.0")
@@ -218,4 +259,5 @@ class SnapshotSeries:
         for f in self._order:
             ET.SubElement(coll, "DataSet", timestep=repr(self._entries[f][1]), group="", part="0", file=f)
         ET.indent(root)
-        atomic_write_bytes(self.pvd_path, ET.tostring(root, encoding="utf-8", xml_declaration=True))
+        with self._open(self.pvd_path.name) as f:
+            f.write(ET.tostring(root, encoding="utf-8", xml_declaration=True))

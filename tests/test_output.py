@@ -135,6 +135,32 @@ def test_snapshot_series_and_resume(tmp_path):
     assert not [p for p in out.iterdir() if ".tmp-" in p.name]
 
 
+def test_series_in_a_run_folder_takes_only_its_manifests_files(tmp_path):
+    """With a RunFolder, the .pvd's entries not in the manifest are dropped (their files left alone),
+    each snapshot is listed before it is written, and a .vtp of the run's name that the manifest does
+    not list is refused, not replaced."""
+    from sphcore import folder
+
+    out = tmp_path / "run"
+    with folder.RunFolder(out) as run_folder:
+        SnapshotSeries(out, "fluid", folder=run_folder).add(0, 0.0, *particles(4))
+    pvd = ET.parse(out / "fluid.pvd")
+    ET.SubElement(pvd.getroot().find("Collection"), "DataSet", timestep="-1", file="experiment_2024001.vtp")
+    pvd.write(out / "fluid.pvd")
+    (out / "experiment_2024001.vtp").write_bytes(b"mine")
+    (out / "fluid_0000020.vtp").write_bytes(b"mine too")
+    with folder.RunFolder(out) as run_folder:
+        series = SnapshotSeries(out, "fluid", folder=run_folder)
+        assert series.files == [out / "fluid_0000000.vtp"]
+        series.add(10, 0.1, *particles(5, seed=1))
+        assert {"fluid.pvd", "fluid_0000000.vtp", "fluid_0000010.vtp"} == run_folder.names
+        with pytest.raises(folder.FolderError, match="fluid_0000020.vtp: a file no sphcore run wrote"):
+            series.add(20, 0.2, *particles(5, seed=2))
+    assert [f for _, f in pvd_entries(out / "fluid.pvd")] == ["fluid_0000000.vtp", "fluid_0000010.vtp"]
+    assert (out / "experiment_2024001.vtp").read_bytes() == b"mine"
+    assert (out / "fluid_0000020.vtp").read_bytes() == b"mine too"
+
+
 def test_atomic_write_keeps_old_file_when_replace_fails(tmp_path, monkeypatch):
     path = tmp_path / "state.bin"
     atomic_write_bytes(path, b"old content")
