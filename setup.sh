@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up a Debian/Ubuntu machine for sphcore: Vulkan on the CPU (lavapipe), the validation
 # layers, the GLSL compilers, OpenGL through EGL on the CPU (llvmpipe, for `sphcore render`'s
-# offscreen pictures: no X server needed), and the project with its test extras in .venv, a
+# offscreen pictures: no X server needed), and the project with its test and docs extras in .venv, a
 # virtual environment made from the distribution's python3 (PEP 668: Debian 12 and Ubuntu 24.04
 # refuse `pip install` into the system interpreter). Safe to run again: it installs only what
 # is missing.
@@ -20,4 +20,4 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 # a .venv whose interpreter is gone (python3 upgraded or moved) is made anew
 .venv/bin/python -c "" 2>/dev/null || python3 -m venv --clear .venv
-.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,docs]"

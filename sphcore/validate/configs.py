@@ -58,7 +58,6 @@ CONFIGS = {
     "engineering_h2": {**ENGINEERING, "fluid.smoothing_ratio": 2.0, "fluid.alpha": 0.02},
     # the recommended model with Fourtakas et al.'s diffusion (its hydrostatic part removed)
     "engineering_fourtakas": {**ENGINEERING, "physics.density_diffusion": "fourtakas"},
-    # the recommended model with summation density (no continuity, no diffusion)
     # issue 14: the incompressible pressure solver (DFSPH) in place of the state equation
     "dfsph": {"physics.pressure_solver": "dfsph"},
     # DFSPH for water that must come to rest: Wendland C2 on 2 dx, 0.8 of each Jacobi update (a tank at rest:
@@ -69,6 +68,7 @@ CONFIGS = {
     # issue 15: the recommended model with its neighbour lists reused between builds (continuity density: the walks
     # add each pair's rate)
     "engineering_list_skin": {**ENGINEERING, "physics.list_skin": 0.1},
+    # the recommended model with summation density (no continuity, no diffusion)
     "engineering_summation": {k: v for k, v in ENGINEERING.items() if k not in (
         "physics.density", "physics.density_diffusion", "fluid.density_diffusion")},
 }

@@ -249,7 +249,7 @@ class Recording:
         """Make every shader write so far visible to every later shader read and write; with `commands`, also to
         the commands that read buffers themselves: indirect dispatches and predicates. Without, the barrier waits
         for the compute stage only (the H200's WCSPH step at 65,536 particles took 0.172 ms with every barrier
-        for commands, 0.138 ms with them only where needed: benchmarks/results/ab_barriers_h200/)."""
+        for commands, 0.138 ms with them only where needed: benchmarks/results/archive/ab_barriers_h200/)."""
         vk = self.ctx.vk
         access = vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT
         stages = vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT
