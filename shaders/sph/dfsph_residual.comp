@@ -88,9 +88,17 @@ void main() {
             // [7] V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start)
             d -= vk.x * g.x + vk.y * g.y + vk.z * g.z;
         }
-        // [8] the residual: compression only
+        // [8] the residual: compression only. The constant-density one is `precise` (NoContraction), so
+        //     that a driver computes it as written, as the mirror does: SPIR-V arithmetic not so marked may be
+        //     reassociated and fused, and lavapipe's compiler computed (rho_i / rho_0 - 1) + dt d_i. Near rest
+        //     that changed the last bit, so the warm start's test residual > 0 flipped for some particles;
+        //     with Wendland C2 (a lattice at rest sums to rho_0) the iteration counts differed from the first
+        //     step (issue 30)
         residual = max(d, real(0.0));
-        if (density) residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0));
+        if (density) {
+            precise real compression = particle_rho[i] / real(P.rest_density) + dt * d - real(1.0);
+            residual = max(compression, real(0.0));
+        }
         // [9] store
         particle_residual[i] = residual;
     }

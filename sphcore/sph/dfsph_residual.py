@@ -83,10 +83,12 @@ def dfsph_residual(spec, real=np.float32):
                 vk_z = -vk_z if (image & 4) != 0 else vk_z
             # [7] V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start)
             d -= vk_x * g_x + vk_y * g_y + vk_z * g_z
-        # [8] the residual: compression only
+        # [8] the residual: compression only. The constant-density one is `precise` in the shader (no
+        #     reassociation, no fused multiply-add: the order written here; issue 30)
         residual = max(d, real(0.0))
         if density:
-            residual = max(particle_rho[i] / real(P.rest_density) + dt * d - real(1.0), real(0.0))
+            compression = particle_rho[i] / real(P.rest_density) + dt * d - real(1.0)
+            residual = max(compression, real(0.0))
         # [9] store
         particle_residual[i] = residual
         return residual
