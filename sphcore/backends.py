@@ -724,11 +724,34 @@ class VulkanBackend:
 BACKENDS = {"numba": NumbaBackend, "vulkan": VulkanBackend}
 
 
+MAX_LOCAL_SIZE = 1024  # invocations of a work group: the most any Vulkan device allows (maxComputeWorkGroupInvocations)
+
+
+def check_options(name, options):
+    """Refuse (ValueError, one line) an unknown backend, an option backend `name` does not take, or a
+    local_size that is no integer within [1, MAX_LOCAL_SIZE]: before a run deletes or writes anything.
+    Any size in that range works on both backends (the reductions, choose_dt and reduce_dt, handle a
+    group that is not a power of two)."""
+    if name not in BACKENDS:
+        raise ValueError(f"unknown backend {name!r}: choose one of {', '.join(BACKENDS)}")
+    import inspect
+
+    taken = [k for k in inspect.signature(BACKENDS[name].__init__).parameters
+             if k not in ("self", "params", "state", "stages", "spec")]
+    unknown = sorted(set(options) - set(taken))
+    if unknown:
+        raise ValueError(f"the {name} backend takes no option {unknown[0]!r} (its options: {', '.join(taken)})")
+    local_size = options.get("local_size", 128)
+    if isinstance(local_size, bool) or not isinstance(local_size, (int, np.integer)) \
+            or not 1 <= local_size <= MAX_LOCAL_SIZE:
+        raise ValueError(f"local_size must be an integer within [1, {MAX_LOCAL_SIZE}] (a work group's invocations), "
+                         f"got {local_size!r}")
+
+
 def make_backend(name, params, state, stages, spec, **options):
     """Backend `name` over `state`; options: local_size, precision ("float32" | "float64"), and
     for Vulkan device, validation, steps_per_submit."""
-    if name not in BACKENDS:
-        raise ValueError(f"unknown backend {name!r}: choose one of {', '.join(BACKENDS)}")
+    check_options(name, options)
     check_obstacles(state, spec)
     check_neighbours(state, spec)
     return BACKENDS[name](params, state, stages, spec, **options)

@@ -4,6 +4,7 @@ A scene file names only what differs from `SCHEMA`'s defaults. Unknown keys, wro
 out-of-range values are rejected with a `SceneError` naming the file and the key. `sphcore
 keys` prints the table below.
 """
+import copy
 import json
 import math
 from dataclasses import dataclass
@@ -79,7 +80,13 @@ LIST_WORDS = {"numba": 1 << 28, "vulkan": (1 << 30) - 1}
 GRADIENT_SLOTS = {"numba": 1 << 26}
 
 class SceneError(ValueError):
-    """A scene that cannot be run; the message names the file and the key."""
+    """A scene that cannot be run; the message names the file and the key.
+
+    >>> import sphcore
+    >>> sphcore.Scene.from_dict({"fluid": {"spacing": -1.0}})
+    Traceback (most recent call last):
+    sphcore.scene.SceneError: fluid.spacing = -1.0: must be within [1e-05, 1] m
+    """
 
 
 @dataclass(frozen=True)
@@ -281,7 +288,17 @@ def _merge(where, schema, given):
 class Scene:
     """A validated scene: `config` holds every key, defaults filled in; `scene["fluid.spacing"]`
     reads one. Make one with `Scene.load(path_or_name)` or `Scene.from_dict({...})` (a dict shaped
-    like the TOML file: only what differs from the defaults; `sphcore keys` lists them)."""
+    like the TOML file: only what differs from the defaults; `sphcore keys` lists them).
+
+    >>> import sphcore
+    >>> scene = sphcore.Scene.from_dict({"fluid": {"spacing": 0.02}})
+    >>> scene["fluid.spacing"], scene["physics.kernel"]  # given, and a default
+    (0.02, 'mueller')
+    >>> scene.dim, len(scene.initial_positions())  # the default block, 0.3 m square, at 2 cm
+    (2, 225)
+    >>> sphcore.Scene.load("dam_break_2d")["fluid.spacing"]  # a shipped scene
+    0.01
+    """
     config: dict
     source: str = "<defaults>"
 
@@ -322,6 +339,17 @@ class Scene:
         except SceneError as e:
             raise SceneError(f"{path}: {e}") from None
 
+    def validated(self):
+        """A copy of this scene checked again, as from_dict checks a new one (SceneError names the key):
+        what sphcore.run and Simulation use, so that a change made to `config` after the scene was
+        loaded (a name with a "/" in it: files outside the output folder), or a Scene built without
+        from_dict, is checked before anything runs or is written, and a change made later does not
+        reach the run."""
+        try:
+            return type(self).from_dict(copy.deepcopy(self.config), self.source)
+        except SceneError as e:
+            raise SceneError(f"{self.source}: {e} (the scene's config was changed after it was checked)") from None
+
     def __getitem__(self, dotted):
         node = self.config
         for part in dotted.split("."):
@@ -330,6 +358,7 @@ class Scene:
 
     @property
     def dim(self):
+        """2 or 3: physics.dimension."""
         return self["physics.dimension"]
 
     @property
@@ -395,6 +424,7 @@ class Scene:
 
     @property
     def h(self):
+        """The kernels' support radius [m]: fluid.spacing times fluid.smoothing_ratio."""
         return self["fluid.spacing"] * self["fluid.smoothing_ratio"]
 
     def _check_models(self):
@@ -528,7 +558,7 @@ class Scene:
         and the grid of half-width cells fits MAX_CELLS, else 1. A scan tests the particles of the (2 split + 1)^dim
         cells around its own: of half-width cells (2.5 reach)^dim of space instead of (3 reach)^dim, 0.58 of the
         candidates in 3D, 0.69 in 2D, at the cost of 2^dim times the cells and shorter runs of particles. Measured
-        (README, The neighbour grid): slower at 2 dx, whose half-width cells hold one particle each in 3D; faster at
+        (docs/models/neighbours.md): slower at 2 dx, whose half-width cells hold one particle each in 3D; faster at
         2.857 dx and at the engineering model's 4 dx."""
         if self["physics.neighbour_search"] == "all_pairs" or self.reach < 2.5 * self["fluid.spacing"]:
             return 1
@@ -575,6 +605,7 @@ class Scene:
 
     @property
     def mass(self):
+        """Each particle's mass [kg; 2D: kg/m]: the mass with which a full lattice's kernel sum is rest_density."""
         return lattice_mass(self["fluid.spacing"], self.h, self["fluid.rest_density"], self.dim, self["physics.kernel"])
 
     def initial_density(self, positions):
@@ -680,11 +711,12 @@ class Scene:
             reach=self.reach, cell_split=self.cell_split)
 
     def to_json(self):
+        """Every key as JSON (what scene.json and final.npz keep; Scene.from_dict(json.loads(...)) reads it)."""
         return json.dumps(self.config, sort_keys=True)
 
 
 def describe_schema(schema=SCHEMA, prefix=""):
-    """Lines of `key  default  unit  range  doc` for every key (for `sphcore keys` and the README)."""
+    """Lines of `key  default  unit  range  doc` for every key (for `sphcore keys` and docs/scenes.md)."""
     lines = []
     for name, key in schema.items():
         path = f"{prefix}{name}"

@@ -49,3 +49,28 @@ class Signals:
         """A safe point: raise Interrupted if a signal was received."""
         if self.received is not None:
             raise Interrupted(self.received, f"interrupted by {signal.Signals(self.received).name} {message}")
+
+
+class HeldInterrupt:
+    """Holds Ctrl-C (SIGINT) for the length of a `with` block, where Python's default handler is in
+    place and the block runs in the main thread: the signal only sets `received`, and the block stops
+    at its next safe point and raises KeyboardInterrupt itself (Simulation.advance: after the chunk of
+    steps it arrived in, counted). Elsewhere (sphcore.run's Signals, a handler of the caller's,
+    another thread) nothing changes and `received` stays None."""
+
+    def __init__(self):
+        self.received, self._previous = None, None
+
+    def __enter__(self):
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
+
+    def _handle(self, signum, frame):
+        self.received = signum

@@ -7,12 +7,14 @@ Every file is written to a temporary name and renamed, so a reader (or a resume)
 half of one.
 """
 import contextlib
+import functools
 import json
 import math
 import os
 import re
 import signal
 import sys
+import threading
 import zipfile
 from pathlib import Path
 
@@ -21,11 +23,21 @@ import numpy as np
 from sphcore.backends import PARTICLE_BUFFERS, REUSE, empty_state, in_particle_order, make_backend, plan
 from sphcore.scene import stable_dt
 from sphcore.sph.dfsph import CONTROL_BUILDS, CONTROL_REBUILD
-from sphcore.signals import Interrupted, Signals  # noqa: F401 (Interrupted: sphcore.simulation.Interrupted)
+from sphcore.signals import HeldInterrupt, Signals
+from sphcore.signals import Interrupted  # noqa: F401 (sphcore.simulation.Interrupted)
 
 
 class SimulationError(RuntimeError):
-    """The state became non-finite or left the box; the message names step, particle and likely cause."""
+    """The state became non-finite or left the box; the message names step, particle and likely cause.
+    Also what a closed Simulation raises when it is used:
+
+    >>> import sphcore
+    >>> with sphcore.Simulation(sphcore.Scene.from_dict({"fluid": {"spacing": 0.05}})) as sim:
+    ...     sim.step(10)
+    >>> sim.read()
+    Traceback (most recent call last):
+    sphcore.simulation.SimulationError: Simulation.read(): this Simulation of 'scene' is closed ...
+    """
 
 
 class CheckpointError(SimulationError):
@@ -44,6 +56,39 @@ CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p
 READ = tuple(dict.fromkeys((*PARTICLE_BUFFERS, "grid_status", *CARRIED)))
 
 
+def _exclusive(method):
+    """A method of Simulation that uses its backend: refused (SimulationError) once the simulation is
+    closed, and while another thread is inside one of these methods (a backend's buffers and a Vulkan
+    queue are for one thread at a time; two threads stepping one state turned it NaN, or corrupted the
+    heap). The same thread may nest them (checkpoint reads, a replay restores and steps)."""
+    @functools.wraps(method)
+    def use(self, *args, **kwargs):
+        if not self._lock.acquire(blocking=False):
+            raise _in_use(self, method.__name__)
+        outer = self._user is None
+        try:
+            if outer:
+                self._user = (threading.current_thread().name, method.__name__)
+            if self._closed:
+                raise SimulationError(f"Simulation.{method.__name__}(): this Simulation of {self.scene['name']!r} is "
+                                      "closed (its buffers are freed); make a new Simulation")
+            return method(self, *args, **kwargs)
+        finally:
+            if outer:
+                self._user = None
+            self._lock.release()
+
+    return use
+
+
+def _in_use(sim, name):
+    """The error for a call of Simulation.`name` while another thread is inside `sim`."""
+    thread, doing = sim._user or ("another thread", "a call")
+    return SimulationError(f"Simulation.{name}() from thread {threading.current_thread().name!r} while thread "
+                           f"{thread!r} is in Simulation.{doing}() on the same Simulation: one thread at a time; wait "
+                           "for it, or give each thread its own Simulation")
+
+
 class Simulation:
     """A scene's particles on one backend ("numba", the default, or "vulkan"; backend_options:
     local_size, and for Vulkan device and validation).
@@ -52,17 +97,34 @@ class Simulation:
     arrays: particle_x, particle_v, particle_a (N, dim), particle_rho, particle_p (N,) and more;
     `time` and `step_count` say where the run is. `write_snapshot(dir)` writes a VTK snapshot,
     `surface()` extracts the fluid's surface (3D). `checkpoint()` and `restore(arrays)` save and
-    put back everything a later step depends on. Use it in a `with` block, or call close()."""
+    put back everything a later step depends on. Use it in a `with` block, or call close().
+
+    >>> import sphcore
+    >>> scene = sphcore.Scene.from_dict({"fluid": {"spacing": 0.05}})  # 6 x 6 particles
+    >>> with sphcore.Simulation(scene, backend="numba") as sim:
+    ...     sim.step(10)
+    ...     state = sim.read()
+    ...     print(sim.step_count, state["particle_x"].shape, state["particle_rho"].dtype)
+    10 (36, 2) float32
+    """
 
     _carried = None  # the CARRIED buffers as the last read() saw them
     energy_start = None  # the energy at the first read, the bound for every later one
+    _closed = False
+    _user = None  # (thread name, method) of the call inside the simulation now (_exclusive)
 
     def __init__(self, scene, backend="numba", *, poll=None, **backend_options):
         """`poll()` is called between the start-up's stages (after each kernel is compiled): a safe
         point where sphcore.run stops on a signal. The host memory the run will need is checked
-        first (sphcore.memory): a run that would not fit is refused before anything is allocated."""
+        first (sphcore.memory): a run that would not fit is refused before anything is allocated. The
+        simulation keeps its own copy of `scene`, checked again (Scene.validated): a change made to the
+        scene after it was loaded is checked, and one made later does not reach the run."""
         from sphcore import memory
+        from sphcore.backends import check_options
 
+        self._lock = threading.RLock()
+        scene = scene.validated()
+        check_options(backend, backend_options)
         memory.check(scene, backend)  # Vulkan: its device memory is checked once the device is known
         poll = poll or (lambda: None)
         if backend == "vulkan":  # lavapipe's device memory is host memory
@@ -92,6 +154,7 @@ class Simulation:
         self.step_count = 0
         self.checked_step = 0
 
+    @_exclusive
     def compute_densities(self):
         """Density and pressure of the current positions (a step without its forces and motion)."""
         for stage in self.stages:
@@ -100,6 +163,7 @@ class Simulation:
                 self.backend.run_stage(stage)
 
     @property
+    @_exclusive
     def time(self):
         """The simulated time [s]: steps times dt, or with time.dt = "adaptive" the sum of the steps' dts,
         kept on the device (time_state: a compensated float32 pair, read here, never per step)."""
@@ -109,6 +173,7 @@ class Simulation:
         return self.step_count * float(self.params[0]["dt"])
 
     @property
+    @_exclusive
     def dt(self):
         """The last step's dt [s]: time.dt, or the device's where it is adaptive (before the first step,
         the scene's estimate)."""
@@ -117,17 +182,32 @@ class Simulation:
             return dt if dt > 0 else self.scene.dt
         return float(self.params[0]["dt"])
 
+    @_exclusive
     def advance(self, steps):
-        if self.scene.dfsph:  # DFSPH: its log is read at least every HISTORY_ROWS steps (sphcore.pressure_solver)
-            from sphcore.sph.dfsph import HISTORY_ROWS
-            while steps > HISTORY_ROWS:
-                self.advance(HISTORY_ROWS)
-                steps -= HISTORY_ROWS
-        self.backend.step(steps)
-        self.step_count += steps
-        if self.scene.dfsph:
-            self.solver_log.collect(self.backend, self.step_count - steps, self.step_count)
+        """Run `steps` steps in chunks (a step on numba, a submission of steps_per_submit on Vulkan: all or
+        nothing), each counted in step_count as it ends. A Ctrl-C (SIGINT under Python's default handler, in
+        the main thread) is held until the chunk it arrived in has run, then raised as KeyboardInterrupt:
+        step_count and time stay true, and the state is that of a whole step (sphcore.signals.HeldInterrupt).
+        DFSPH: its log is read at least every HISTORY_ROWS steps (sphcore.pressure_solver)."""
+        from sphcore.sph.dfsph import HISTORY_ROWS
 
+        chunk, collected, end = getattr(self.backend, "steps_per_submit", 1), self.step_count, self.step_count + steps
+        with HeldInterrupt() as held:
+            while self.step_count < end and held.received is None:
+                k = min(chunk, end - self.step_count)
+                if self.scene.dfsph:
+                    k = min(k, HISTORY_ROWS - (self.step_count - collected))
+                self.backend.step(k)
+                self.step_count += k
+                if self.scene.dfsph and (self.step_count - collected == HISTORY_ROWS or self.step_count == end
+                                         or held.received is not None):
+                    self.solver_log.collect(self.backend, collected, self.step_count)
+                    collected = self.step_count
+        if held.received is not None:
+            raise KeyboardInterrupt(f"stopped after step {self.step_count} ({self.step_count - (end - steps)} of "
+                                    f"the {steps} asked for)")
+
+    @_exclusive
     def read(self):
         """The state in particle order (vectors of `dim` components), checked. A check that fails
         more than one step after the last good one is replayed from there a step at a time, so
@@ -145,13 +225,17 @@ class Simulation:
         self._carried = {name: raw[name] for name in CARRIED}
         if self.energy_start is None:
             self.energy_start = sum(self.energy(state))
-        self._build_lists_next()
+        self.build_lists_next()
         return state
 
-    def _build_lists_next(self):
-        """Reused lists (physics.list_skin): the next step builds them. After every read of the state, so that a
-        run resumed from it (restore) steps on as the run that read it did: bitwise the same. (A replay, which
-        reads every step, builds every step: its sums run in another order than the run it replays.)"""
+    @_exclusive
+    def build_lists_next(self):
+        """Reused lists (physics.list_skin): the next step builds them. The lists are not in a checkpoint, so a
+        run resumed from one (restore) builds at its first step; to step on bitwise as the run that wrote it,
+        that run builds there too: after every read of the state (checkpoint() reads), and in sphcore.run
+        after each of its chunks of steps, where a signal may stop it and write a checkpoint whether or not
+        the run never stopped reads there. (A replay, which reads every step, builds every step: its sums run
+        in another order than the run it replays.)"""
         if self.spec.LIST_SKIN:
             control = self.backend.read_buffer("dfsph_control")
             control[CONTROL_REBUILD] = 1
@@ -192,6 +276,7 @@ class Simulation:
         ctx = getattr(self.backend, "ctx", None)
         return ctx.device_name if ctx is not None else "cpu"
 
+    @_exclusive
     def checkpoint(self):
         """The arrays of a checkpoint at the current step (read and checked first: a blown-up state
         is never saved). The buffers are kept in the backend's order, not in particle order: the
@@ -208,6 +293,7 @@ class Simulation:
             arrays["solver_log"] = self.solver_log.array()
         return arrays
 
+    @_exclusive
     def restore(self, arrays):
         """Continue from `arrays` (of `checkpoint()`, possibly on another backend): its buffers
         replace the backend's, its step becomes the step count. The energy bound is not taken
@@ -230,7 +316,7 @@ class Simulation:
             self.backend.write_buffer(name, values)
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
-        self._build_lists_next()
+        self.build_lists_next()
         if self.scene.dfsph and "solver_log" in arrays:  # (a replay's restore keeps the rows it has)
             self.solver_log.rows = {int(r[0]): np.array(r, np.float64) for r in arrays["solver_log"]
                                     if 0 < r[0] <= self.step_count}
@@ -280,7 +366,9 @@ class Simulation:
     def check_energy(self, state):
         """Raise SimulationError if the energy grew past its start by 10 % (plus, per particle, the
         potential energy of a quarter smoothing length and the kinetic energy of 1 % of the sound
-        speed), or a particle outruns twice the sound speed plus the free-fall speed (an explosion)."""
+        speed), or a particle outruns twice the sound speed plus the free-fall speed (an explosion).
+        The free-fall speed: from the top of the fluid to the floor, and in an open domain, where
+        nothing stops a fall, also |g| t. The message says which of the two failed, with its figures."""
         scene = self.scene
         if self.energy_start is None or scene["physics.surface_tension"]:  # cohesion's energy is not counted
             return
@@ -289,11 +377,20 @@ class Simulation:
         allowed = (self.energy_start + 0.1 * abs(self.energy_start)
                    + self.n * scene.mass * (g * scene.h / 4 + 0.5 * (0.01 * c) ** 2))
         speed = np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1))
-        limit = 2.0 * (c + scene.speed_estimate())
+        fall = scene.speed_estimate() + (g * self.time if scene["domain.boundary"] == "open" else 0.0)
+        limit = 2.0 * (c + fall)
         energy = sum(self.energy(state))
         if energy <= allowed and speed.max() <= limit:
             return
         i = int(np.argmax(speed))
+        went = "rose" if energy > self.energy_start else "fell"
+        if energy > allowed:
+            what = (f"the energy rose from {self.energy_start:.4g} J to {energy:.4g} J, past the {allowed:.4g} J "
+                    f"allowed, and particle {i} moves at {speed[i]:.3g} m/s (sound speed {c:.3g} m/s)")
+        else:
+            what = (f"particle {i} moves at {speed[i]:.3g} m/s, past the {limit:.3g} m/s allowed (twice the sound "
+                    f"speed {c:.3g} m/s plus the free-fall speed {fall:.3g} m/s), while the energy {went} from "
+                    f"{self.energy_start:.4g} J to {energy:.4g} J")
         dt_max, bound = stable_dt(scene, scene.speed_estimate())
         dt = scene.dt
         lo, hi = np.asarray(scene["domain.box_min"]), np.asarray(scene["domain.box_max"])
@@ -307,17 +404,27 @@ class Simulation:
             cause = (f"particle {i} is {gap:.3g} m from a wall, closer than half a spacing, where its mirror images "
                      "(the walls' ghost particles) push it; a particle that starts on a wall is pushed by images "
                      "that coincide with it: start the fluid at least fluid.spacing / 2 inside the box")
-        else:
+        elif energy > allowed:
             lower = "time.dt_fraction" if scene["time.dt"] == "auto" else "time.dt"
             cause = (f"dt = {dt:g} s is within the estimated {bound} bound {dt_max:.3g} s, yet the state gains "
                      f"energy: lower {lower} (a stiff fluid needs a fraction of the CFL bound)")
-        raise SimulationError(f"blow-up at step {self.step_count} (t = {self.time:.6g} s): the energy rose from "
-                              f"{self.energy_start:.4g} J to {energy:.4g} J and particle {i} moves at "
-                              f"{speed[i]:.3g} m/s (sound speed {c:.3g} m/s); likely cause: {cause}")
+        else:
+            cause = (f"one particle flung without the energy growing (dt = {dt:g} s is within the estimated {bound} "
+                     f"bound {dt_max:.3g} s): a pair too close, or a force that is not the physics'; please report it")
+        raise SimulationError(f"blow-up at step {self.step_count} (t = {self.time:.6g} s): {what}; "
+                              f"likely cause: {cause}")
 
     def close(self):
-        """Free the backend's buffers (and the Vulkan device); the simulation cannot step after it."""
-        self.backend.close()
+        """Free the backend's buffers (and the Vulkan device); every later use raises SimulationError
+        (a second close does nothing). Refused while another thread uses the simulation."""
+        if not self._lock.acquire(blocking=False):
+            raise _in_use(self, "close")
+        try:
+            if not self._closed:
+                self._closed = True
+                self.backend.close()
+        finally:
+            self._lock.release()
 
     # -- the Python API (sphcore.Simulation): a run step by step, from a script or a notebook
 
@@ -327,23 +434,29 @@ class Simulation:
     def __exit__(self, *exc):
         self.close()
 
+    @_exclusive
     def step(self, steps=1):
         """Run `steps` time steps on the backend (no readback: call read() for the state)."""
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
             raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
         self.advance(int(steps))
 
+    @_exclusive
     def write_snapshot(self, out_dir, state=None):
         """Write the current state (read() unless `state` is given) as a VTK snapshot
-        out_dir/<name>_<step>.vtp and list it in out_dir/<name>.pvd (for ParaView); return its path."""
+        out_dir/<name>_<step>.vtp and list it in out_dir/<name>.pvd (for ParaView); return its path.
+        The folder is locked for the write, as a run locks it (sphcore.folder.RunFolder): refused
+        (FolderError, naming the pid) while a run or another writer holds it."""
+        from sphcore import folder
         from sphcore.output import SnapshotSeries
 
         state = self.read() if state is None else state
-        if getattr(self, "_series", None) is None or self._series.out_dir != Path(out_dir):
-            self._series = SnapshotSeries(out_dir, self.scene["name"])
-        return self._series.add(self.step_count, self.time, state["particle_x"], {
-            "velocity": state["particle_v"], "density": state["particle_rho"], "pressure": state["particle_p"]})
+        with folder.RunFolder(out_dir) as run_folder:
+            series = SnapshotSeries(out_dir, self.scene["name"], folder=run_folder)
+            return series.add(self.step_count, self.time, state["particle_x"], {
+                "velocity": state["particle_v"], "density": state["particle_rho"], "pressure": state["particle_p"]})
 
+    @_exclusive
     def surface(self, spacing=None, level=0.5, backend=None, state=None):
         """The fluid's surface now (3D scenes): (verts, faces, normals) of the isosurface at `level`
         of the colour field, sampled every `spacing` (default h / 2), by marching cubes on `backend`
@@ -396,29 +509,37 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
     the last good snapshot; SIGINT or SIGTERM raises Interrupted after a checkpoint at the step
     reached; a Vulkan failure raises VulkanError naming the checkpoint to resume from. Files
     already written are kept.
+
+    >>> import os, tempfile, sphcore
+    >>> out = tempfile.mkdtemp()
+    >>> final = sphcore.run(sphcore.Scene.from_dict({"fluid": {"spacing": 0.05}}), steps=20, out_dir=out,
+    ...                     progress=False)
+    >>> int(final["step"]), final["position"].shape
+    (20, (36, 2))
+    >>> sorted(f for f in os.listdir(out) if not f.startswith("sphcore-"))
+    ['checkpoint.npz', 'final.npz', 'scene.json', 'scene.pvd', 'scene_0000000.vtp', 'scene_0000020.vtp']
     """
     from tqdm import tqdm
 
     from sphcore import folder, memory
-    from sphcore.output import SnapshotSeries, atomic_savez, atomic_write_bytes
+    from sphcore.output import SnapshotSeries
     from sphcore.vk_runner import VulkanError
 
-    steps = scene["time.steps"] if steps is None else steps
-    out_dir = Path(out_dir or Path("runs") / scene["name"])
+    scene, steps, out_dir = _run_arguments(scene, backend, steps, out_dir, progress, checkpoint, overwrite,
+                                           backend_options)  # each checked before the folder is touched
     memory.check(scene, backend)  # before the folder is touched (Simulation checks again, with the device)
     if checkpoint is not None and steps < int(checkpoint["step"]):
         raise CheckpointError(f"{out_dir / CHECKPOINT} is at step {int(checkpoint['step'])}, past the {steps} "
                               f"steps asked for: give --steps {int(checkpoint['step'])} or more")
     every, checkpoint_every = scene["time.output_every"], scene["time.checkpoint_every"]
-    with Signals() as signals, _locked(out_dir, folder.lock):
+    with Signals() as signals, folder.RunFolder(out_dir) as run_folder:  # locked; writes only its own files
         folder.remove_stale_temporaries(out_dir)
-        if checkpoint is None:
-            folder.prepare_new_run(out_dir, overwrite)
+        run_folder.prepare(scene["name"], resume=checkpoint is not None, overwrite=overwrite)
         signals.poll()
         if checkpoint is None:
-            atomic_write_bytes(out_dir / "scene.json", scene.to_json().encode())  # what render and resume read
+            run_folder.write_bytes("scene.json", scene.to_json().encode())  # what render and resume read
         try:
-            series = SnapshotSeries(out_dir, scene["name"])
+            series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
         except (SyntaxError, ValueError) as e:  # xml.etree's ParseError is a SyntaxError
             raise SimulationError(f"{out_dir / scene['name']}.pvd: not a readable ParaView collection ({e}); move "
                                   "it away, or write to another folder") from None
@@ -438,7 +559,7 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
 
         def save_checkpoint():
             nonlocal saved
-            atomic_savez(out_dir / CHECKPOINT, **sim.checkpoint())
+            run_folder.savez(CHECKPOINT, **sim.checkpoint())
             saved = sim.step_count
 
         try:
@@ -459,6 +580,7 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
                     k = min(chunk, steps - sim.step_count, every - sim.step_count % every,
                             checkpoint_every - sim.step_count % checkpoint_every)
                     sim.advance(k)
+                    sim.build_lists_next()  # (a step where the loop may stop, on a signal too: see there)
                     bar.update(k)
                     if sim.step_count % every == 0 or sim.step_count == steps:
                         state = None  # the previous state's arrays are freed before the next read
@@ -473,7 +595,7 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
                                       f"at step {sim.step_count} of {steps}; checkpoint written: continue "
                                       f"with `sphcore run --resume {out_dir}`")
             arrays = final_arrays(sim, state)
-            atomic_savez(out_dir / "final.npz", **arrays)
+            run_folder.savez("final.npz", **arrays)
         except BaseException as e:
             _count_validation(sim)
             try:
@@ -492,6 +614,35 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
         _count_validation(sim)
         sim.close()
         return arrays
+
+
+def _run_arguments(scene, backend, steps, out_dir, progress, checkpoint, overwrite, backend_options):
+    """run()'s arguments checked, before anything is deleted or written: (the scene checked again, a
+    copy: Scene.validated; the steps; the folder). A bad one raises ValueError (SceneError for the
+    scene) naming it."""
+    from collections.abc import Mapping
+
+    from sphcore.backends import check_options
+    from sphcore.checkpoint import MAX_STEP
+    from sphcore.scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a sphcore.Scene (Scene.load or Scene.from_dict), got {type(scene).__name__}")
+    scene = scene.validated()
+    check_options(backend, backend_options)
+    steps = scene["time.steps"] if steps is None else steps
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or not 0 <= steps <= MAX_STEP:
+        raise ValueError(f"steps must be an integer within [0, {MAX_STEP}] (the steps in all, counted from the run's "
+                         f"start), got {steps!r}")
+    if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
+        raise ValueError(f"out_dir must be a path (str or os.PathLike), got {type(out_dir).__name__}")
+    for name, value in (("progress", progress), ("overwrite", overwrite)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, got {value!r}")
+    if checkpoint is not None and not (isinstance(checkpoint, Mapping) and "step" in checkpoint):
+        raise ValueError("checkpoint must be the arrays of load_checkpoint (a mapping with a step), got "
+                         f"{type(checkpoint).__name__}")
+    return scene, int(steps), Path(out_dir or Path("runs") / scene["name"])
 
 
 def _count_validation(sim):
@@ -532,13 +683,13 @@ def _numba_hint(error, scene):
 def load_checkpoint(out_dir):
     """(scene, checkpoint arrays) of the run in `out_dir`: the scene of out_dir/scene.json, which
     must be the one the checkpoint was computed with and give the same parameter block."""
+    from sphcore import folder
     from sphcore.scene import Scene
 
     out_dir = Path(out_dir)
     path, scene_file = out_dir / CHECKPOINT, out_dir / "scene.json"
     if not path.is_file():
-        raise CheckpointError(f"{path}: no such file; `sphcore run SCENE --out {out_dir}` writes one at the start "
-                              "and every time.checkpoint_every steps")
+        raise CheckpointError(folder.missing_checkpoint(out_dir, CHECKPOINT))
     from sphcore.checkpoint import CheckpointFieldError, read_checked, read_scene
     from sphcore.scene import read_limited
 
@@ -599,7 +750,15 @@ def resume(out_dir, backend=None, steps=None, progress=True, **backend_options):
     """Continue the run in `out_dir` from its checkpoint until it has `steps` steps in all (default:
     the scene's time.steps), on `backend` (default: the one that wrote the checkpoint). The
     snapshot series continues; with the same backend and device the final state is bitwise that
-    of a run never stopped."""
+    of a run never stopped.
+
+    >>> import tempfile, sphcore
+    >>> out = tempfile.mkdtemp()
+    >>> scene = sphcore.Scene.from_dict({"fluid": {"spacing": 0.05}})
+    >>> _ = sphcore.run(scene, steps=20, out_dir=out, progress=False)
+    >>> int(sphcore.resume(out, steps=40, progress=False)["step"])  # 20 steps more
+    40
+    """
     scene, checkpoint = load_checkpoint(out_dir)
     return run(scene, backend or str(checkpoint["backend"]), steps, out_dir, progress, checkpoint=checkpoint,
                **backend_options)
