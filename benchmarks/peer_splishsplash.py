@@ -60,7 +60,7 @@ def sphcore_side(settings, t_end, backend="numba"):
 
 def splash_scene(scene, settings, largest_dt):
     """SPlisHSPlasH's JSON for the sphcore scene."""
-    a, dx = settings["a"], scene["fluid.spacing"]
+    dx = scene["fluid.spacing"]
     lo, hi = scene["domain.box_min"], scene["domain.box_max"]
     block = scene["fluid.blocks"][0]
     size = [h - l for l, h in zip(lo, hi)]

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from sphcore.paths import SCENE_DIR  # noqa: F401 (tests and scripts import it from here)
-from sphcore.scene import scene_path
+from sphcore.scene import scene_path  # noqa: F401 (tests and scripts import it from here)
 
 
 def printable(message):

@@ -18,9 +18,9 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from sphcore.params import CELL_PADDING, KERNELS, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
+from sphcore.paths import SCENE_DIR
 
 DENSITY_DIFFUSIONS = ("none", "molteni", "fourtakas")  # physics.density_diffusion -> spec constant DENSITY_DIFFUSION
-from sphcore.paths import SCENE_DIR
 
 
 def shipped_scenes():
@@ -153,7 +153,7 @@ SCHEMA = {
                       "boxes filled with particles on a square (cubic) lattice: [{min = [...], max = [...]}]",
                       "blocks"),
         "spacing": Key(0.01, "m", 1e-5, 1.0, "particle spacing dx of the initial lattice"),
-        "smoothing_ratio": Key(2.0, "-", 1.5, 6.0, "smoothing length h / spacing"),
+        "smoothing_ratio": Key(2.0, "-", 1.5, 6.0, "support radius h / spacing"),
         "rest_density": Key(1000.0, "kg/m^3", 1.0, 1e5, "rest density rho_0"),
         "stiffness": Key(400.0, "m^2/s^2", 1.0, 1e8,
                          "k = c^2 for a speed of sound c (about 10x the fastest flow); linear and Tait alike"),

@@ -365,7 +365,7 @@ class Simulation:
 
     def check_energy(self, state):
         """Raise SimulationError if the energy grew past its start by 10 % (plus, per particle, the
-        potential energy of a quarter smoothing length and the kinetic energy of 1 % of the sound
+        potential energy of a fall of h / 4 and the kinetic energy of 1 % of the sound
         speed), or a particle outruns twice the sound speed plus the free-fall speed (an explosion).
         The free-fall speed: from the top of the fluid to the floor, and in an open domain, where
         nothing stops a fall, also |g| t. The message says which of the two failed, with its figures."""

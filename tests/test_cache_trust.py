@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import VALIDATION, vulkan_or_skip
+from conftest import VALIDATION, skip_unless_compiler, vulkan_or_skip
 from sphcore import cache_trust
 from sphcore.cache_trust import CacheWarning
 
@@ -209,17 +209,6 @@ def test_numba_reads_a_read_only_cache_and_writes_nothing(filled, tmp_path):
 
 
 # --- SPIR-V -----------------------------------------------------------------------------------------------
-
-def skip_unless_compiler():
-    from sphcore.vk_runner import ShaderCompileError
-    from sphcore.vk_runner.compiler import find_compiler
-    try:
-        find_compiler()
-    except ShaderCompileError as e:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(str(e))
-
 
 def shader(name):
     from sphcore.paths import SHADER_DIR

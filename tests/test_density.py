@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import BACKENDS, assert_stage_agrees, open_backend, particles, scene_state, vulkan_or_skip  # noqa: F401
+from conftest import BACKENDS, assert_stage_agrees, particles, scene_state, vulkan_or_skip  # noqa: F401
 
 from sphcore.backends import Stage, in_particle_order, make_backend, plan
 from sphcore.params import PARAMS_DTYPE, Spec, kernel_coefficients, lattice_mass

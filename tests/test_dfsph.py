@@ -567,7 +567,6 @@ def test_vulkan_windows_give_the_bits_of_the_whole_budget(monkeypatch):
     whole, whole_log, _ = run_with(None)
     dispatched = (whole_log[:, 3] - 1).clip(0).sum() + (whole_log[:, 5] - 1).clip(0).sum()
     assert dispatched > 24  # solves that need more than one update: windows of one suspend
-    one_log = None
     for window in (1, None):
         if window == 1:
             monkeypatch.setattr(backends, "FIRST_WINDOW", 1)

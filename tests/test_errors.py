@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import vulkan_or_skip
+from conftest import skip_unless_compiler, vulkan_or_skip
 from sphcore.cli import main
 from sphcore.scene import Scene
 from sphcore.simulation import SimulationError, run, stable_dt
@@ -61,17 +61,6 @@ def assert_clean_failure(proc, out_dir, *needles):
         assert needle in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
     assert not (out_dir / "final.npz").exists()
-
-
-def skip_unless_compiler():
-    from sphcore.vk_runner import ShaderCompileError
-    from sphcore.vk_runner.compiler import find_compiler
-    try:
-        find_compiler()
-    except ShaderCompileError as e:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(str(e))
 
 
 # ---- scene files ----

@@ -8,8 +8,6 @@ from numba import njit
 
 from sphcore.mc import generate_tables
 from sphcore.mc.tables import CASE_EDGES, CASE_VERTICES, CASE_WIDTH, EDGE_AXIS, EDGE_CORNERS, NO_EDGE
-from sphcore.vk_runner import ShaderCompileError, compile_glsl
-from sphcore.vk_runner.compiler import find_compiler
 
 CORNERS = [tuple(int(k) for k in corners) for corners in EDGE_CORNERS]
 # the six cube faces as sets of edges: face (a, side) holds the corners with offset `side` along a

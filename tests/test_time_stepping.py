@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import BACKENDS, assert_stage_agrees, particles, scene_state, vulkan_or_skip
 
-from sphcore.backends import Stage, empty_state, plan
+from sphcore.backends import empty_state, plan
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import CARRIED, CHECKPOINT, Simulation, resume, run
 

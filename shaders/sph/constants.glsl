@@ -1,6 +1,6 @@
 // Compile-time choices of a scene, as specialization constants: a term a scene does not use is
-// compiled out. Constant 0 is the work-group size. sphcore/plan.py sets these from the scene
-// (`specialization`); the numba mirrors receive the same values as closure constants.
+// compiled out. Constant 0 is the work-group size. Scene.spec (sphcore/scene.py) sets these from
+// the scene; the numba mirrors receive the same values as closure constants.
 layout(constant_id = 1) const uint DIM = 3;              // 2 or 3
 layout(constant_id = 2) const bool GRID = true;          // neighbours from the grid (else all pairs)
 layout(constant_id = 3) const bool WALLS = true;         // box walls (else an open domain, cells hashed)

@@ -5,7 +5,7 @@
 // components are 0 and unused.
 layout(push_constant) uniform Params {
     uint n;               // particle count
-    float h;              // smoothing length [m]
+    float h;              // support radius [m] (every kernel is zero past h)
     float h2;             // h^2 [m^2]
     float density_coef;   // m times W's coefficient (kernels.glsl: m W = density_coef kernel_w); mueller:
                           // W_poly6's, 2D m 4/(pi h^8), 3D m 315/(64 pi h^9)

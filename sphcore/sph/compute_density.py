@@ -44,7 +44,7 @@ def can_list_first(spec):
 
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
-    DIM, GRID, WALLS, TAIT, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.WALLS, spec.TAIT, spec.NEIGHBOUR_STATS
+    GRID, NEIGHBOUR_STATS = spec.GRID, spec.NEIGHBOUR_STATS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
     near_walls_within, list_reach = skin(spec, real)[:2]
     listed_distance = neighbour_list(spec, real)[2]

@@ -28,7 +28,7 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def compute_forces(spec, real=np.float32):
-    DIM, GRID, WALLS = spec.DIM, spec.GRID, spec.WALLS
+    GRID = spec.GRID
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
     DFSPH, MAX_NEIGHBOURS = spec.DFSPH, spec.MAX_NEIGHBOURS
     cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)

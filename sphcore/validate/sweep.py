@@ -265,8 +265,11 @@ def recommendations(rows, threshold=THRESHOLD):
     points, and per axis what changing it did; with a text that says it in words."""
     ok = ok_rows(rows)
     meeting = [r for r in ok if r[ERROR] <= threshold]
-    pick = lambda r: None if r is None else {"point": r["point"], "label": label(r), ERROR: r[ERROR], COST: r[COST],
-                                             **{k: r[k] for k in POINT_KEYS}}  # noqa: E731
+
+    def pick(r):
+        return None if r is None else {"point": r["point"], "label": label(r), ERROR: r[ERROR], COST: r[COST],
+                                       **{k: r[k] for k in POINT_KEYS}}
+
     rec = {"threshold": threshold, "error": ERROR, "cost": COST, "points": len(rows), "ok": len(ok),
            "cheapest_meeting_threshold": pick(min(meeting, key=lambda r: (r[COST], r[ERROR]), default=None)),
            "most_accurate": pick(min(ok, key=lambda r: (r[ERROR], r[COST]), default=None)),

@@ -40,7 +40,7 @@ def find_compiler():
 def _command(kind, path, source, output, target_env, defines=()):
     flags = [f"-D{d}" for d in defines]  # the same spelling for both compilers: -DNAME or -DNAME=VALUE
     if kind == "glslangValidator":
-        return [path, "-V", f"--target-env", target_env, *flags, "-I" + str(source.parent), "-o", str(output),
+        return [path, "-V", "--target-env", target_env, *flags, "-I" + str(source.parent), "-o", str(output),
                 str(source)]
     return [path, f"--target-env={target_env}", "-fshader-stage=compute", *flags, "-I", str(source.parent),
             "-o", str(output), str(source)]
