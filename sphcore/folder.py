@@ -128,12 +128,6 @@ def remove_stale_temporaries(out_dir):
             pass  # a live process of another user (or not a pid): leave its file
 
 
-def holds_run(out_dir):
-    """Whether out_dir holds files its manifest lists (a run's)."""
-    out_dir = Path(out_dir)
-    return any((out_dir / name).exists() for name in listed(out_dir) or ())
-
-
 def missing_checkpoint(out_dir, checkpoint="checkpoint.npz"):
     """The message for a resume of `out_dir` where it has no checkpoint, with advice that works."""
     out_dir = Path(out_dir)

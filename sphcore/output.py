@@ -180,6 +180,28 @@ def write_vtp(path, position, point_data) -> None:
         write_vtp_to(f, position, point_data)
 
 
+def snapshot_step(name):
+    """The step of a snapshot NAME_NNNNNNN.vtp (-1 for any other name)."""
+    m = re.search(r"_(\d+)\.vtp$", str(name))
+    return int(m.group(1)) if m else -1
+
+
+def read_pvd(path):
+    """[(file name, time)] of the data sets of ParaView series `path`; raises OSError, xml.etree's ParseError
+    (a SyntaxError) or ValueError (a time that is no number)."""
+    return [(ds.get("file", ""), float(ds.get("timestep", "nan"))) for ds in ET.parse(path).getroot().iter("DataSet")]
+
+
+def pvd_bytes(entries):
+    """A ParaView series (.pvd) of [(file name, time)]."""
+    root = ET.Element("VTKFile", type="Collection", version="1.0")
+    coll = ET.SubElement(root, "Collection")
+    for name, t in entries:
+        ET.SubElement(coll, "DataSet", timestep=repr(float(t)), group="", part="0", file=name)
+    ET.indent(root)
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True)
+
+
 class SnapshotSeries:
     """Numbered .vtp snapshots in `out_dir` plus `{name}.pvd` listing them for ParaView.
 
@@ -205,12 +227,10 @@ class SnapshotSeries:
         self.pvd_path = self.out_dir / f"{name}.pvd"
         self._entries = {}  # file name relative to out_dir -> (step, time)
         if self.pvd_path.exists() and (folder is None or self.pvd_path.name in folder.names):
-            for ds in ET.parse(self.pvd_path).getroot().iter("DataSet"):
-                if folder is not None and ds.get("file") not in folder.names:
+            for name, time in read_pvd(self.pvd_path):
+                if folder is not None and name not in folder.names:
                     continue  # not a snapshot of this run's
-                m = re.search(r"_(\d+)\.vtp$", ds.get("file", ""))
-                step = int(m.group(1)) if m else -1  # foreign entries sort first
-                self._entries[ds.get("file")] = (step, float(ds.get("timestep", "0")))
+                self._entries[name] = (snapshot_step(name), time)  # (foreign entries, step -1, sort first)
         self._update_files()
 
     def _update_files(self):
@@ -254,10 +274,5 @@ class SnapshotSeries:
                     (self.out_dir / f).unlink(missing_ok=True)
 
     def _write_pvd(self):
-        root = ET.Element("VTKFile", type="Collection", version="1.0")
-        coll = ET.SubElement(root, "Collection")
-        for f in self._order:
-            ET.SubElement(coll, "DataSet", timestep=repr(self._entries[f][1]), group="", part="0", file=f)
-        ET.indent(root)
         with self._open(self.pvd_path.name) as f:
-            f.write(ET.tostring(root, encoding="utf-8", xml_declaration=True))
+            f.write(pvd_bytes((name, self._entries[name][1]) for name in self._order))

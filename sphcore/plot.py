@@ -25,8 +25,9 @@ def _unreadable(path, why):
 
 
 def read_final(path):
-    """{position, velocity, time, step, scene} of final.npz `path`; SceneError naming the file and what
-    is wrong with it (not an .npz archive, damaged, a member missing or of the wrong kind)."""
+    """{position, velocity, time, step, scene, config} of final.npz `path` (scene: its name and box;
+    config: the whole scene table); SceneError naming the file and what is wrong with it (not an .npz
+    archive, damaged, a member missing or of the wrong kind)."""
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -57,7 +58,7 @@ def read_final(path):
         raise _unreadable(path, f"position {x.dtype}{list(x.shape)} and velocity {v.dtype}{list(v.shape)} are not "
                                 "two arrays of N points")
     try:
-        scene = json.loads(str(out["scene"]))
+        scene = out["config"] = json.loads(str(out["scene"]))
         lo, hi = [float(a) for a in scene["domain"]["box_min"]], [float(a) for a in scene["domain"]["box_max"]]
         out["scene"], out["time"] = {"name": str(scene["name"]), "box_min": lo, "box_max": hi}, float(out["time"])
         if not (len(lo) >= 2 and len(hi) >= 2 and hi[0] > lo[0] and hi[1] > lo[1]):

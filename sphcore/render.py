@@ -15,10 +15,12 @@ import os
 import re
 import sys
 import xml.etree.ElementTree as ET
-import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from sphcore import output
+from sphcore.output import snapshot_step
 
 if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -134,6 +136,7 @@ def render_mesh(verts, faces, normals, png_path, particles=None, box=None, camer
 def read_scene(run_dir):
     """The scene of a run folder, from its scene.json or else its final.npz, or SceneError naming
     the file and what is wrong with it (missing, truncated, not sphcore's)."""
+    from sphcore.plot import read_final
     from sphcore.scene import Scene, SceneError
 
     run_dir = Path(run_dir)
@@ -146,17 +149,7 @@ def read_scene(run_dir):
             raise SceneError(f"{source}: not a readable scene ({str(e)[:200]})") from None
     elif (run_dir / "final.npz").is_file():
         source = run_dir / "final.npz"
-        try:
-            with np.load(source) as npz:
-                data = json.loads(str(npz["scene"]))
-        except KeyError:
-            raise SceneError(f"{source}: holds no scene, so it is no final state of a sphcore run") from None
-        except ValueError as e:  # object arrays (sphcore never writes them), or not JSON
-            raise SceneError(f"{source}: not a final state of a sphcore run (its scene is not readable: "
-                             f"{type(e).__name__})") from None
-        except (OSError, EOFError, zipfile.BadZipFile) as e:
-            raise SceneError(f"{source}: not a readable final state, truncated or not an .npz "
-                             f"({str(e)[:200]})") from None
+        data = read_final(source)["config"]  # (checked member by member, never unpickled)
     else:
         raise SceneError(f"{run_dir}: no scene.json or final.npz, so no scene to render; is it a `sphcore run` folder?")
     if not isinstance(data, dict):
@@ -170,16 +163,9 @@ def read_pvd(pvd):
     from sphcore.scene import SceneError
 
     try:
-        root = ET.parse(pvd).getroot()
-        return [(ds.get("file", ""), float(ds.get("timestep", "nan"))) for ds in root.iter("DataSet")]
+        return output.read_pvd(pvd)
     except (OSError, ET.ParseError, ValueError) as e:
         raise SceneError(f"{pvd}: not a readable .pvd series ({str(e)[:200]})") from None
-
-
-def snapshot_step(path):
-    """The step of a snapshot NAME_NNNNNNN.vtp (-1 for any other name)."""
-    m = re.search(r"_(\d+)\.vtp$", Path(path).name)
-    return int(m.group(1)) if m else -1
 
 
 def load_run(run_dir):
@@ -271,10 +257,11 @@ def refuse_clash(out_dir, names):
         return
     theirs = listed(out_dir) or set()
     try:
-        of_run = names_of_run(json.loads((out_dir / "scene.json").read_text(encoding="utf-8"))["name"])
+        theirs |= set(filter(names_of_run(json.loads((out_dir / "scene.json").read_text(encoding="utf-8"))["name"]),
+                             names))
     except (OSError, ValueError, KeyError, TypeError):
-        of_run = lambda name: False  # noqa: E731 (no run's scene there)
-    clash = sorted(name for name in names if name in theirs or of_run(name))
+        pass  # no run's scene there
+    clash = sorted(set(names) & theirs)
     if clash:
         raise SceneError(f"{out_dir}: holds a run whose file names `sphcore render` would write over "
                          f"({clash[0]}{' and more' if len(clash) > 1 else ''}); give another --out")
@@ -282,11 +269,7 @@ def refuse_clash(out_dir, names):
 
 def write_pvd(path, entries):
     """A .pvd series of [(file name, time)], atomically."""
-    root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
-    collection = ET.SubElement(root, "Collection")
-    for name, t in entries:
-        ET.SubElement(collection, "DataSet", timestep=repr(float(t)), group="", part="0", file=name)
-    data = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    data = output.pvd_bytes(entries)
     return replace_into(path, lambda tmp: Path(tmp).write_bytes(data))
 
 

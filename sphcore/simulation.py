@@ -6,7 +6,6 @@ to bitwise the same final state as a run that was never stopped, on the same bac
 Every file is written to a temporary name and renamed, so a reader (or a resume) never sees
 half of one.
 """
-import contextlib
 import functools
 import json
 import math
@@ -651,16 +650,6 @@ def _count_validation(sim):
     if getattr(ctx, "validation", False):
         count = len(ctx.validation_messages)
         print(f"sphcore: {count} Vulkan validation error(s){' (printed above)' if count else ''}", file=sys.stderr)
-
-
-@contextlib.contextmanager
-def _locked(out_dir, lock):
-    """Hold `lock(out_dir)` (a file descriptor) for the length of the block."""
-    fd = lock(out_dir)
-    try:
-        yield
-    finally:
-        os.close(fd)
 
 
 def _numba_hint(error, scene):
