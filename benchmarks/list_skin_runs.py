@@ -32,13 +32,13 @@ def run(scene, backend, t_end, per_submit, profile=None):
     with Simulation(scene, backend, **({"profile": profile} if profile else {})) as sim:
         sim.advance(per_submit)  # (numba compiles, Vulkan records)
         first_time, first_step = sim.time, sim.step_count
-        builds_before = int(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS])
+        builds_before = int(sim.backend.read_buffer("control")[CONTROL_BUILDS])
         start = time.perf_counter()
         while sim.time < t_end:
             sim.advance(per_submit)
         wall = time.perf_counter() - start
         steps = sim.step_count - first_step
-        builds = int(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS]) - builds_before
+        builds = int(sim.backend.read_buffer("control")[CONTROL_BUILDS]) - builds_before
         row = {"particles": sim.n, "steps": steps, "simulated_s": sim.time - first_time, "wall_s": wall,
                "ms_per_step": 1e3 * wall / steps, "wall_per_simulated_s": wall / (sim.time - first_time),
                "builds_per_step": builds / steps if scene["physics.list_skin"] else 1.0,

@@ -101,7 +101,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
         t0 = time.perf_counter()
         be.step(chunk if backend == "vulkan" else 1)  # numba compiles; vulkan records and runs once
         warmup = time.perf_counter() - t0
-        builds_before = int(be.read()["dfsph_control"][CONTROL_BUILDS])  # (and a sync)
+        builds_before = int(be.read()["control"][CONTROL_BUILDS])  # (and a sync)
         steps, start = 0, time.perf_counter()
         while True:
             be.step(chunk)
@@ -110,7 +110,7 @@ def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, 
             if seconds >= min_seconds:
                 break
         out = be.read()
-        builds = int(out["dfsph_control"][CONTROL_BUILDS]) - builds_before
+        builds = int(out["control"][CONTROL_BUILDS]) - builds_before
         device_name = be.ctx.device_name if backend == "vulkan" else cpu_name()
         if profile:  # one more chunk, every dispatch timed (Vulkan: GPU timestamps), apart from the timing above
             from sphcore.profile import Profile, work

@@ -73,27 +73,27 @@ BUFFERS = {
     "dt_partial": (REAL, 2, "particles"),
     "particle_alpha": (REAL, 1, "particles"),
     "particle_residual": (REAL, 1, "particles"),
-    "dfsph_control": (np.uint32, 1, CONTROL_SIZE),
+    "control": (np.uint32, 1, CONTROL_SIZE),
     "dfsph_state": (np.float32, 1, 8),
     "dfsph_history": (np.float32, 8, 256),
     "particle_kappa": (REAL, 1, "particles"),
     "dfsph_partial": (REAL, 1, "particles"),
-    "dfsph_neighbours": (np.uint32, 1, "neighbours"),
-    "dfsph_neighbour_count": (np.uint32, 1, "particles"),
-    "dfsph_gradients": (REAL, 4, "gradients"),
+    "neighbours": (np.uint32, 1, "neighbours"),
+    "neighbour_count": (np.uint32, 1, "particles"),
+    "neighbour_gradients": (REAL, 4, "gradients"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
 # particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
 # scratch_v, the sort's scratch, holds v* = v + dt a during DFSPH's constant-density solve (dfsph_predict);
 # dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
-# dfsph_neighbours, dfsph_neighbour_count: each particle's neighbour list for the solves' sweeps, written by
+# neighbours, neighbour_count: each particle's neighbour list for the solves' sweeps, written by
 # dfsph_factor (spec.MAX_NEIGHBOURS slots a particle, rounded up to whole chunks of 4, dfsph.list_width:
 # "neighbours" is n times that, at least 1 word);
-# dfsph_gradients: with spec.GRADIENTS (DFSPH on numba), each list entry's V grad_i W, which dfsph_factor
+# neighbour_gradients: with spec.GRADIENTS (DFSPH on numba), each list entry's V grad_i W, which dfsph_factor
 # writes in the list's layout: a pair's distance, direction and kernel are computed once a step, not in every
 # sweep ("gradients" is as long as "neighbours" then, else 1).
-# dfsph_control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
+# control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
 # step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
 # particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl); under
 # DFSPH, which never runs Verlet, the sum of a particle's list entries' V grad_i W (dfsph_factor writes it,
@@ -127,38 +127,38 @@ STAGES = {
     "compute_density": (compute_density, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
                                                        "cell_pyramid", "cell_start", "scratch_x", "particle_id",
                                                        "particle_neighbours", "obstacle_box", "particle_drho",
-                                                       "dfsph_control", "dfsph_neighbours", "dfsph_neighbour_count")),
+                                                       "control", "neighbours", "neighbour_count")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "cell_pyramid", "cell_start", "scratch_x",
-                                                     "obstacle_box", "dfsph_control", "dfsph_neighbours",
-                                                     "dfsph_neighbour_count")),
+                                                     "obstacle_box", "control", "neighbours",
+                                                     "neighbour_count")),
     "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
-                                                 "dfsph_control", "dfsph_state", "particle_kappa", "dfsph_neighbours",
-                                                 "dfsph_neighbour_count", "dfsph_gradients", "particle_vh")),
+                                                 "control", "dfsph_state", "particle_kappa", "neighbours",
+                                                 "neighbour_count", "neighbour_gradients", "particle_vh")),
     "dfsph_predict": (dfsph_predict, "particles", ("particle_v", "particle_a", "scratch_v", "time_state")),
     "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "scratch_v", "particle_rho",
                                                      "obstacle_box", "time_state", "particle_residual",
-                                                     "dfsph_partial", "dfsph_neighbours", "dfsph_neighbour_count",
-                                                     "dfsph_gradients", "dfsph_control", "dfsph_state",
+                                                     "dfsph_partial", "neighbours", "neighbour_count",
+                                                     "neighbour_gradients", "control", "dfsph_state",
                                                      "dfsph_history", "particle_vh")),
     "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "obstacle_box", "time_state", "particle_alpha",
-                                                     "particle_residual", "dfsph_control", "particle_kappa",
-                                                     "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_gradients",
+                                                     "particle_residual", "control", "particle_kappa",
+                                                     "neighbours", "neighbour_count", "neighbour_gradients",
                                                      "scratch_v")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "scratch_x", "obstacle_box",
-                                           "particle_vh", "time_state", "dfsph_control")),
+                                           "particle_vh", "time_state", "control")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
                                                            "time_state")),
 }
 
 Stage = namedtuple("Stage", "name level indirect when")  # level: the HistoPyramid level a reduce_cells builds,
 #   the solve of a DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), compute_density's walk of
-#   reused lists (1), else 0; indirect: its work groups are read from dfsph_control when it runs (indirect_offset),
+#   reused lists (1), else 0; indirect: its work groups are read from control when it runs (indirect_offset),
 #   as vkCmdDispatchIndirect does; when: with reused lists (spec.LIST_SKIN), BUILD for a stage that runs only at a
-#   build of the lists, REUSE only between builds, as dfsph_control[CONTROL_REBUILD] says when it runs (on Vulkan
+#   build of the lists, REUSE only between builds, as control[CONTROL_REBUILD] says when it runs (on Vulkan
 #   by conditional rendering), else ALWAYS
 ALWAYS, BUILD, REUSE = 0, 1, 2
 Stage.__new__.__defaults__ = (0, False, ALWAYS)
@@ -214,7 +214,7 @@ def dfsph_solve(solve, iterations):
 
 
 def indirect_offset(stage):
-    """The index in dfsph_control of an indirect stage's (x, y, z) work group counts (dfsph.glsl)."""
+    """The index in control of an indirect stage's (x, y, z) work group counts (dfsph.glsl)."""
     return dispatch_base(stage.level)
 
 
@@ -256,7 +256,7 @@ def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gra
         state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
-    state["dfsph_control"][CONTROL_REBUILD] = 1  # (reused lists, spec.LIST_SKIN: the first step builds them)
+    state["control"][CONTROL_REBUILD] = 1  # (reused lists, spec.LIST_SKIN: the first step builds them)
     if len(obstacles) > MAX_OBSTACLES:
         raise ValueError(f"{len(obstacles)} obstacles: the obstacle_box buffer holds at most {MAX_OBSTACLES}")
     wall_lo, wall_hi = params[0]["box_min"], params[0]["box_max"]
@@ -269,8 +269,8 @@ def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gra
     return state
 
 
-def list_entries(state, spec, name="dfsph_neighbours"):
-    """Buffer `name` of the neighbour lists (dfsph_neighbours, or dfsph_gradients) of a state run with `spec`,
+def list_entries(state, spec, name="neighbours"):
+    """Buffer `name` of the neighbour lists (neighbours, or neighbour_gradients) of a state run with `spec`,
     as (particles, spec.MAX_NEIGHBOURS[, 4]) in particle order of the buffers: either layout (list_slot)."""
     n, slots = len(state["particle_id"]), spec.MAX_NEIGHBOURS
     if spec.LIST_BY_PARTICLE:
@@ -302,12 +302,12 @@ def check_neighbours(state, spec):
     particle: the state must have room for them (empty_state's `max_neighbours`), and every (j, image)
     must fit in a word (dfsph.glsl)."""
     n, width = len(state["particle_id"]), list_width(spec.MAX_NEIGHBOURS)
-    if len(state["dfsph_neighbours"]) < n * width:
-        raise ValueError(f"the plan's neighbour lists need {n} x {width} words but dfsph_neighbours "
-                         f"holds {len(state['dfsph_neighbours'])}: pass the scene's spec.MAX_NEIGHBOURS to empty_state")
-    if spec.GRADIENTS and len(state["dfsph_gradients"]) < n * width:
-        raise ValueError(f"DFSPH's pair gradients need {n} x {width} entries but dfsph_gradients holds "
-                         f"{len(state['dfsph_gradients'])}: pass the spec's GRADIENTS to empty_state")
+    if len(state["neighbours"]) < n * width:
+        raise ValueError(f"the plan's neighbour lists need {n} x {width} words but neighbours "
+                         f"holds {len(state['neighbours'])}: pass the scene's spec.MAX_NEIGHBOURS to empty_state")
+    if spec.GRADIENTS and len(state["neighbour_gradients"]) < n * width:
+        raise ValueError(f"DFSPH's pair gradients need {n} x {width} entries but neighbour_gradients holds "
+                         f"{len(state['neighbour_gradients'])}: pass the spec's GRADIENTS to empty_state")
     if spec.MAX_NEIGHBOURS > 0 and (n > NEIGHBOUR_MASK or n * width >= 2 ** 32):
         raise ValueError(f"{n} particles with {spec.MAX_NEIGHBOURS} neighbour slots each: the neighbour lists "
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
@@ -410,7 +410,7 @@ class NumbaBackend:
         return launch
 
     def _groups(self, stage):
-        """A stage's work groups, or for an indirect one the index in dfsph_control to read them from
+        """A stage's work groups, or for an indirect one the index in control to read them from
         (as a negative number: -1 - index)."""
         if stage.indirect:
             return -1 - indirect_offset(stage)
@@ -418,10 +418,10 @@ class NumbaBackend:
 
     def _launch_groups(self, groups, when=ALWAYS):
         """A launch's work groups now: none where the stage's `when` does not hold (reused lists: a build or not,
-        as dfsph_control[CONTROL_REBUILD] says)."""
-        if when != ALWAYS and (self.state["dfsph_control"][CONTROL_REBUILD] != 0) != (when == BUILD):
+        as control[CONTROL_REBUILD] says)."""
+        if when != ALWAYS and (self.state["control"][CONTROL_REBUILD] != 0) != (when == BUILD):
             return 0
-        return groups if groups >= 0 else int(self.state["dfsph_control"][-1 - groups])
+        return groups if groups >= 0 else int(self.state["control"][-1 - groups])
 
     def warm_up(self, after_each=None):
         """Compile every stage of the plan without running it (a launch of no work groups: numba
@@ -547,7 +547,7 @@ class VulkanBackend:
 
     def _recording(self, steps, stages, timed=False, predicate=False, secondary=False):
         """`steps` steps of `stages` in one command buffer (`secondary`: a secondary one); `timed`: a
-        timestamp after each dispatch; `predicate`: each dispatch only while dfsph_control[CONTROL_RUNNING]
+        timestamp after each dispatch; `predicate`: each dispatch only while control[CONTROL_RUNNING]
         is not 0. Untimed, the steps run one step's secondary command buffer (recorded once: a dispatch
         costs about 30 us of Python to record)."""
         key = (steps, tuple(stages), timed, predicate, secondary)
@@ -559,7 +559,7 @@ class VulkanBackend:
                 rec.execute([self._recording(1, stages, predicate=predicate, secondary=True)] * steps)
                 self._recordings[key] = rec.end()
                 return rec
-            control = self.buffers["dfsph_control"]
+            control = self.buffers["control"]
             running = (control, 4 * CONTROL_RUNNING) if predicate else None
             if timed:
                 rec.timestamp(rec.timer, 0)
@@ -579,7 +579,7 @@ class VulkanBackend:
                     rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
                                  dispatch_size(stage, self.params), predicate=running if block == ALWAYS else None)
                 # a barrier for the commands too where the next stage (of the step, or of the next step) reads
-                # dfsph_control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
+                # control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
                 after = rec.stages[(k + 1) % len(rec.stages)]
                 rec.barrier(predicate or after.indirect or after.when not in (ALWAYS, stage.when))
                 if timed:
@@ -616,7 +616,7 @@ class VulkanBackend:
         return self._windowed(dfsph_solve(solve, self.windows[solve])[1:] + self.stages[last + 1:])
 
     def _windowed_steps(self, steps, control):
-        """Run up to `steps` steps with windows (dfsph.glsl) from the device's dfsph_control as `control` holds
+        """Run up to `steps` steps with windows (dfsph.glsl) from the device's control as `control` holds
         it, resuming a suspended solve to the end of its step (the submission's later steps were skipped);
         return (the control after them, the steps completed)."""
         first, timed = int(control[CONTROL_STEP]), self.profile is not None
@@ -625,10 +625,10 @@ class VulkanBackend:
             control[CONTROL_RUNNING] = 1
             for solve, window in self.windows.items():
                 control[CONTROL_WINDOW + solve] = window
-            if not np.array_equal(control, self._known.get("dfsph_control")):  # (mostly the device's already)
-                self.write_buffer("dfsph_control", control)
+            if not np.array_equal(control, self._known.get("control")):  # (mostly the device's already)
+                self.write_buffer("control", control)
             self._submit(self._recording(steps, stages, timed, predicate=True))
-            control = self._read("dfsph_control")
+            control = self._read("control")
             if control[CONTROL_RUNNING]:
                 break
             # a solve spent its window unconverged, the rest of the submission was skipped: resume there
@@ -668,7 +668,7 @@ class VulkanBackend:
             if rest:
                 self._submit_steps(rest)
             return
-        control, done = self._read("dfsph_control"), 0
+        control, done = self._read("control"), 0
         while done < count:
             steps = min(count - done, self.steps_per_submit)
             control, steps = self._windowed_steps(steps, control)
@@ -688,10 +688,10 @@ class VulkanBackend:
         return {name: self.read_buffer(name) for name in (BUFFERS if names is None else names)}
 
     def read_buffer(self, name):
-        """One buffer's contents, read back from the device. dfsph_control as the mirror keeps it: the windows
+        """One buffer's contents, read back from the device. control as the mirror keeps it: the windows
         the Vulkan host leaves on the device between calls (dfsph.glsl) read as 0."""
         array = self._read(name)
-        if name == "dfsph_control":
+        if name == "control":
             array[CONTROL_WINDOW + SOLVE_DIVERGENCE] = array[CONTROL_WINDOW + SOLVE_DENSITY] = 0
         return array
 

@@ -16,6 +16,7 @@ from sphcore.backends import BACKENDS, BUFFERS, buffer_dtype, buffer_length
 
 MAX_STEP = 10**9  # time.steps' range
 MAX_TEXT = 2**20  # characters of the scene's JSON, the backend and device names
+RENAMED = {"buffer_dfsph_control": "buffer_control"}  # members of earlier versions, read under today's names
 MAX_EXTRA = 2**28  # bytes of a member beyond the buffers (a solver's log), loaded as it is
 
 
@@ -71,7 +72,7 @@ def read_checked(path, scene, params, carried, optional=("energy_start",)):
     members = expected_members(scene, params, carried)
     arrays = {}
     with zipfile.ZipFile(path) as archive:
-        stored = {name[:-4]: name for name in archive.namelist() if name.endswith(".npy")}
+        stored = {RENAMED.get(name[:-4], name[:-4]): name for name in archive.namelist() if name.endswith(".npy")}
         for field, (dtype, shape) in list(members.items()) + [(f, (np.dtype(np.float64), ())) for f in optional]:
             if field not in stored:
                 if field in optional:
@@ -92,10 +93,10 @@ def read_checked(path, scene, params, carried, optional=("energy_start",)):
                 raise CheckpointFieldError(field, f"is {got_dtype}{list(got_shape)}: no checkpoint holds that")
         with np.load(path, allow_pickle=False) as data:
             for field in members:
-                arrays[field] = data[field]
+                arrays[field] = data[stored[field][:-4]]
             for field in list(optional) + extras:
                 if field in stored:
-                    arrays[field] = data[field]
+                    arrays[field] = data[stored[field][:-4]]
     check_values(arrays, scene, params, carried)
     return arrays
 

@@ -27,14 +27,14 @@ class ConvergenceWarning(UserWarning):
 
 def init_state(state, scene):
     """Write the scene's solver settings into `state` (of backends.empty_state, its positions set): the
-    iteration budget into dfsph_control, the two tolerances and the relaxation into dfsph_state; and the stiffness sum
+    iteration budget into control, the two tolerances and the relaxation into dfsph_state; and the stiffness sum
     kappa = p / rho_0 of the hydrostatic pressure (Scene.hydrostatic_pressure) into particle_kappa, so
     that the first step's warm start holds part of the column up, as every later step's does (from
     zero, a Jacobi solve needs about as many iterations as the column is particles tall)."""
     x = state["particle_x"][:, :scene.dim]
     state["particle_kappa"][:] = scene.hydrostatic_pressure(x) / scene["fluid.rest_density"]
-    state["dfsph_control"][CONTROL_MAX_ITERATIONS] = scene["fluid.max_iterations"]
-    state["dfsph_control"][CONTROL_RUNNING] = 1  # (the predicate of the Vulkan host's windows: dfsph.glsl)
+    state["control"][CONTROL_MAX_ITERATIONS] = scene["fluid.max_iterations"]
+    state["control"][CONTROL_RUNNING] = 1  # (the predicate of the Vulkan host's windows: dfsph.glsl)
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DIVERGENCE] = scene["fluid.max_divergence_error"]
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DENSITY] = scene["fluid.max_density_error"]
     state["dfsph_state"][STATE_RELAXATION] = scene["fluid.relaxation"]
@@ -60,7 +60,7 @@ class SolverLog:
             if int(row[0]) != step:  # the step count is the device's and the host's: they cannot differ
                 raise RuntimeError(f"DFSPH history: row for step {step} holds step {int(row[0])}")
             self.rows[step] = row
-        control = backend.read_buffer("dfsph_control")
+        control = backend.read_buffer("control")
         failures = int(control[CONTROL_FAILURES])
         if failures > self.reported:
             self.warn(control, backend.read_buffer("dfsph_state"), failures, last)
@@ -71,7 +71,7 @@ class SolverLog:
     def overflow(self, backend, step, last):
         """Raise SimulationError for a neighbour list overflow first seen at `step` (the steps up to `last`
         ran): name the slots, and the particle with the longest list now."""
-        count = backend.read_buffer("dfsph_neighbour_count")
+        count = backend.read_buffer("neighbour_count")
         k = int(np.argmax(count))
         particle = int(backend.read_buffer("particle_id")[k])
         diverged = self.diverged()

@@ -49,7 +49,7 @@ CHECKPOINT = "checkpoint.npz"
 # every other buffer is rewritten by each step before any stage reads it.
 CARRIED = ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_p", "particle_id", "grid_status",
            "particle_vh", "time_state",  # Verlet's half-step velocity; dt, the last dt and the time (adaptive dt)
-           "dfsph_control", "dfsph_state",  # DFSPH: its step count, unconverged solves, tolerances and errors,
+           "control", "dfsph_state",  # DFSPH: its step count, unconverged solves, tolerances and errors,
            "particle_kappa")  # and its warm start
 # What read() takes from the backend: the per-particle state, the grid's status and the carried buffers.
 READ = tuple(dict.fromkeys((*PARTICLE_BUFFERS, "grid_status", *CARRIED)))
@@ -236,9 +236,9 @@ class Simulation:
         the run never stopped reads there. (A replay, which reads every step, builds every step: its sums run
         in another order than the run it replays.)"""
         if self.spec.LIST_SKIN:
-            control = self.backend.read_buffer("dfsph_control")
+            control = self.backend.read_buffer("control")
             control[CONTROL_REBUILD] = 1
-            self.backend.write_buffer("dfsph_control", control)
+            self.backend.write_buffer("control", control)
 
     def _replay(self):
         """Step again from the last good state, one step at a time, until a check fails (it raises)."""
@@ -319,7 +319,7 @@ class Simulation:
         if self.scene.dfsph and "solver_log" in arrays:  # (a replay's restore keeps the rows it has)
             self.solver_log.rows = {int(r[0]): np.array(r, np.float64) for r in arrays["solver_log"]
                                     if 0 < r[0] <= self.step_count}
-            self.solver_log.reported = int(arrays["buffer_dfsph_control"][6])  # CONTROL_FAILURES: reported then
+            self.solver_log.reported = int(arrays["buffer_control"][6])  # CONTROL_FAILURES: reported then
 
     def check_grid(self, status):
         """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
@@ -484,7 +484,7 @@ def final_arrays(sim, state):
     for field in sim.params.dtype.names:
         arrays[f"param_{field}"] = np.asarray(sim.params[0][field])
     if sim.spec.LIST_SKIN:  # reused lists: their builds since the start (the start's own included)
-        arrays["list_builds"] = np.int64(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS])
+        arrays["list_builds"] = np.int64(sim.backend.read_buffer("control")[CONTROL_BUILDS])
     if sim.scene.dfsph:  # DFSPH: each step's dt, time, iterations and final errors (sphcore.pressure_solver)
         from sphcore.pressure_solver import LOG_COLUMNS
         arrays["solver_log"] = sim.solver_log.array()

@@ -11,7 +11,7 @@ from sphcore.paths import SHADER_DIR
 
 DECLARATION = re.compile(r"layout\(std430, binding = (\d+)\)[^{]*\{\s*(\w+)\s+(\w+)\[\];\s*\};[ \t]*(// \(unread)?")
 # GLSL element type -> (BUFFERS dtype, components per element in BUFFERS); a type with more components
-# than its buffer is a view of it by chunks (dfsph_chunks: dfsph_neighbours four words at a time), one with
+# than its buffer is a view of it by chunks (neighbour_chunks: neighbours four words at a time), one with
 # fewer a flat view (dt_partial's pairs, dfsph_history's rows as floats)
 TYPES = {"real": (REAL, 1), "real4": (REAL, 4), "float": (np.float32, 1), "vec4": (np.float32, 4),
          "uint": (np.uint32, 1), "uvec2": (np.uint32, 2), "uvec4": (np.uint32, 4)}

@@ -83,7 +83,7 @@ def counted_lists(state, spec):
     """list_entries up to each particle's count, the rest zeroed: a slot-major list's last chunk is written whole,
     so its slots past the count hold what the scan last gathered there (unread)."""
     lists = list_entries(state, spec).copy()
-    count = np.minimum(state["dfsph_neighbour_count"], spec.MAX_NEIGHBOURS)
+    count = np.minimum(state["neighbour_count"], spec.MAX_NEIGHBOURS)
     lists[np.arange(lists.shape[1])[None, :] >= count[:, None]] = 0
     return lists
 
@@ -109,22 +109,22 @@ def test_solver_stages_agree_and_count_the_same_iterations():
             gap = np.abs(a.pop("particle_residual") - b.pop("particle_residual")).max()
             # numba stores the pair gradients (spec.GRADIENTS), Vulkan computes them again in each sweep; the
             # lists are particle-major on numba, slot-major on Vulkan (list_entries reads both)
-            assert cpu.spec.GRADIENTS and not gpu.spec.GRADIENTS and len(b.pop("dfsph_gradients")) == 1
-            a.pop("dfsph_gradients")
+            assert cpu.spec.GRADIENTS and not gpu.spec.GRADIENTS and len(b.pop("neighbour_gradients")) == 1
+            a.pop("neighbour_gradients")
             assert cpu.spec.LIST_BY_PARTICLE and not gpu.spec.LIST_BY_PARTICLE
-            a["dfsph_neighbours"] = counted_lists(a, cpu.spec)
-            b["dfsph_neighbours"] = counted_lists(b, gpu.spec)
+            a["neighbours"] = counted_lists(a, cpu.spec)
+            b["neighbours"] = counted_lists(b, gpu.spec)
             assert gap <= 8 * np.finfo(np.float32).eps, f"after {stage}: particle_residual differs by {gap:g}"
             assert_stage_agrees(a, b, stage, STAGE_RTOL)
             if stage.name == "dfsph_factor":  # the step starts both solves' indirect dispatches
                 groups = group_count(len(a["particle_x"]), cpu.backend.local_size)
                 for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY):
                     base = dispatch_base(solve)
-                    assert list(a["dfsph_control"][base:base + 3]) == [groups, 1, 1]
+                    assert list(a["control"][base:base + 3]) == [groups, 1, 1]
             # the residual's last work group checks, and leaves the count of finished groups at 0 for the next
-            assert a["dfsph_control"][CONTROL_FINISHED] == b["dfsph_control"][CONTROL_FINISHED] == 0
+            assert a["control"][CONTROL_FINISHED] == b["control"][CONTROL_FINISHED] == 0
         for solve in (SOLVE_DIVERGENCE, SOLVE_DENSITY):  # both stopped: the rest of the budget dispatched nothing
-            assert a["dfsph_control"][dispatch_base(solve)] == 0
+            assert a["control"][dispatch_base(solve)] == 0
         cpu.step_count = gpu.step_count = 1
         for sim in (cpu, gpu):
             sim.solver_log.collect(sim.backend, 0, 1)
@@ -156,7 +156,7 @@ def test_relaxation_scales_the_factor(backend):
     full, half = factors[1.0], factors[0.5]
     assert (full["particle_alpha"] > 0).all()
     assert np.array_equal(half["particle_alpha"], np.float32(0.5) * full["particle_alpha"])
-    for name in ("particle_p", "particle_kappa", "dfsph_neighbours", "dfsph_control"):
+    for name in ("particle_p", "particle_kappa", "neighbours", "control"):
         assert np.array_equal(half[name], full[name]), name
 
 
@@ -208,7 +208,7 @@ def test_wendland_c2_warm_starts_the_same_particles_on_both_backends(relaxation)
                 warm_start = after is not None and after.name == "dfsph_velocity" and after.level == SOLVE_WARM_START
                 if warm_start:  # the residual the warm start reads, from numba's state on both
                     for name, values in cpu.backend.read().items():  # (each side walks its own lists' layout)
-                        if name not in ("dfsph_neighbours", "dfsph_gradients"):
+                        if name not in ("neighbours", "neighbour_gradients"):
                             gpu.backend.write_buffer(name, values)
                 cpu.backend.run_stage(stage)
                 gpu.backend.run_stage(stage)
@@ -261,7 +261,7 @@ def test_neighbour_lists_hold_every_pair_within_h():
         st = sim.backend.state
         n, slots = sim.n, scene.max_neighbours
         x = st["particle_x"][:, :2].astype(np.float64)
-        count = st["dfsph_neighbour_count"].copy()
+        count = st["neighbour_count"].copy()
         lists = list_entries(st, sim.spec).copy()
     assert slots == 26 and len(lists) == n and 0 < count.max() <= slots
     expected = neighbours(x, scene.h, scene["domain.box_min"], scene["domain.box_max"])
@@ -316,7 +316,7 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
     assert scene.spec_for("vulkan") == scene.spec_for("numba")._replace(LIST_BY_PARTICLE=False, LIST_CHUNKS=True)
     with Simulation(scene, "numba") as sim:
         sim.advance(40)  # the column collapsing into the corner: images of both walls
-        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
+        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "neighbours"}
     stages = [s for s in plan(scene) if s.name in ("compute_density", "compute_forces") or not s.name.startswith(
         ("compute_", "reduce_dt", "choose_dt", "integrate"))]
     accelerations, counts = {}, {}
@@ -325,7 +325,7 @@ def test_state_equation_forces_from_lists_are_the_scans(backend):
         state.update({k: v.copy() for k, v in moving.items()})
         out = run_stages(backend, scene.params(sim.n), state, stages,
                          scene.spec._replace(MAX_NEIGHBOURS=slots, LIST_CHUNKS=chunks))
-        accelerations[slots, chunks], counts[slots, chunks] = out["particle_a"], out["dfsph_neighbour_count"]
+        accelerations[slots, chunks], counts[slots, chunks] = out["particle_a"], out["neighbour_count"]
     assert np.abs(accelerations[0, False]).max() > 9.81 * 1.01  # more than gravity acts
     assert 0 < (counts[8, True] > 8).sum() < sim.n and counts[26, True].max() <= 26  # too short for some, not all
     for key in accelerations:
@@ -344,7 +344,7 @@ def test_both_list_layouts_hold_the_same_lists(backend):
     scene = scene_of(**{"physics.pressure_solver": "state_equation"})
     with Simulation(scene, "numba") as sim:
         sim.advance(40)  # the column collapsing into the corner: images of both walls
-        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "dfsph_neighbours"}
+        moving = {k: v.copy() for k, v in sim.backend.state.items() if k != "neighbours"}
     n = sim.n
     stages = plan(scene)[:plan(scene).index(Stage("compute_density")) + 1]
     for slots in (26, 7):
@@ -355,9 +355,9 @@ def test_both_list_layouts_hold_the_same_lists(backend):
                                        LIST_CHUNKS=layout == "chunk")
             state = empty_state(scene.params(n), max_neighbours=slots)
             state.update({k: v.copy() for k, v in moving.items()})
-            state["dfsph_neighbours"] = np.full(n * width + 64, 0xFFFFFFFF, np.uint32)
+            state["neighbours"] = np.full(n * width + 64, 0xFFFFFFFF, np.uint32)
             out = run_stages(backend, scene.params(n), state, stages, spec)
-            words, count = out["dfsph_neighbours"], out["dfsph_neighbour_count"]
+            words, count = out["neighbours"], out["neighbour_count"]
             assert (words[n * (width if layout == "chunk" else slots):] == 0xFFFFFFFF).all(), (slots, layout)
             word_of = {"particle": lambda i, s: i * slots + s, "slot": lambda i, s: s * n + i,
                        "chunk": lambda i, s: 4 * ((s // 4) * n + i) + s % 4}[layout]
@@ -391,7 +391,7 @@ def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend, variant):
     precision = scene["physics.precision"]
     with Simulation(scene, "vulkan" if variant else "numba") as sim:
         sim.advance(40)
-        moving = {k: v.copy() for k, v in sim.backend.read().items() if k != "dfsph_neighbours"}
+        moving = {k: v.copy() for k, v in sim.backend.read().items() if k != "neighbours"}
     stages = plan(scene)[:plan(scene).index(Stage("compute_density")) + 1]
 
     def scan(slots, free):
@@ -401,12 +401,12 @@ def test_branch_free_scan_gives_the_bits_of_the_branching_one(backend, variant):
         out = run_stages(backend, scene.params(sim.n), state, stages, spec, precision=precision)
         return out, list_entries(out, spec)
 
-    fullest = int(scan(scene.max_neighbours, False)[0]["dfsph_neighbour_count"].max())
+    fullest = int(scan(scene.max_neighbours, False)[0]["neighbour_count"].max())
     for slots in (scene.max_neighbours, fullest, fullest - 4):
         (a, a_lists), (b, b_lists) = scan(slots, False), scan(slots, True)
-        count = a["dfsph_neighbour_count"]
+        count = a["neighbour_count"]
         assert count.min() > 0 and (slots >= fullest or (count > slots).any())
-        for name in ("particle_rho", "particle_p", "dfsph_neighbour_count"):
+        for name in ("particle_rho", "particle_p", "neighbour_count"):
             assert np.array_equal(b[name], a[name]), (slots, name)
         for i in np.flatnonzero(count <= slots):
             assert np.array_equal(b_lists[i, :count[i]], a_lists[i, :count[i]]), (slots, i)
@@ -430,9 +430,9 @@ def test_numba_runs_either_scan_from_timed_from_particles_with_the_same_bits(mon
             assert not launches or launches[0].calls == 45
             states[timed_from] = sim.backend.read()
     a, b = states[1], states[10**9]
-    for name in set(a) - {"dfsph_neighbours"}:  # (a list's slots past its count: the scan's last candidates)
+    for name in set(a) - {"neighbours"}:  # (a list's slots past its count: the scan's last candidates)
         assert np.array_equal(a[name], b[name]), name
-    count, lists = a["dfsph_neighbour_count"], [list_entries(state, sim.spec) for state in (a, b)]
+    count, lists = a["neighbour_count"], [list_entries(state, sim.spec) for state in (a, b)]
     assert all(np.array_equal(lists[0][i, :count[i]], lists[1][i, :count[i]]) for i in range(sim.n))
 
 
@@ -509,7 +509,7 @@ def test_divergence_free_solve_removes_a_planted_divergence():
         for stage in solve[2:]:
             sim.backend.run_stage(stage)
         after = st["particle_residual"].mean() * 0.002
-        control, err = st["dfsph_control"].copy(), st["dfsph_state"][2 + SOLVE_DIVERGENCE]
+        control, err = st["control"].copy(), st["dfsph_state"][2 + SOLVE_DIVERGENCE]
     assert before > 20 * scene["fluid.max_divergence_error"]
     assert control[0 + SOLVE_DIVERGENCE] == 1 and control[2 + SOLVE_DIVERGENCE] >= 1
     assert after == pytest.approx(err, rel=1e-5) and err <= scene["fluid.max_divergence_error"]
@@ -603,18 +603,18 @@ def test_stored_pair_gradients_give_the_bits_of_computed_ones(backend, monkeypat
     (a, log_a), (b, log_b) = runs[True], runs[False]
     assert np.array_equal(log_a, log_b) and (log_a[:, 5] >= 2).all()
     for name in a:
-        if name != "dfsph_gradients":
+        if name != "neighbour_gradients":
             assert np.array_equal(a[name], b[name]), name
     # the stored entries: alpha_i = 1 / (|sum_j g|^2 + sum_j |g|^2) over each particle's list
     spec = scene.spec_for(backend)._replace(GRADIENTS=True)
-    g = list_entries(a, spec, "dfsph_gradients")[:, :, :3].astype(np.float64)
+    g = list_entries(a, spec, "neighbour_gradients")[:, :, :3].astype(np.float64)
     slots = spec.MAX_NEIGHBOURS
-    used = np.arange(slots)[None, :] < np.minimum(a["dfsph_neighbour_count"], slots)[:, None]
+    used = np.arange(slots)[None, :] < np.minimum(a["neighbour_count"], slots)[:, None]
     g[~used] = 0.0
     s = (g.sum(axis=1) ** 2).sum(axis=1) + (g ** 2).sum(axis=(1, 2))
     alone = s <= 1e-6 / scene.h ** 2
     assert np.allclose(a["particle_alpha"][~alone], 1.0 / s[~alone], rtol=1e-4)
-    assert not alone.all() and (a["dfsph_gradients"][:, 3] == 0).all()
+    assert not alone.all() and (a["neighbour_gradients"][:, 3] == 0).all()
 
 
 def test_state_holds_the_settings():
@@ -623,7 +623,7 @@ def test_state_holds_the_settings():
     state = empty_state(params)
     state["particle_x"][:, :2] = [[0.005, 0.095], [0.005, 0.005], [0.2, 0.05], [0.095, 0.045]]
     init_state(state, scene)
-    assert state["dfsph_control"][9] == 7
+    assert state["control"][9] == 7
     assert state["dfsph_state"][SOLVE_DENSITY] == np.float32(2e-3)
     # the first step's warm start: kappa = p / rho_0 = |g| times the depth below the column's top (0.1 m);
     # none outside the column

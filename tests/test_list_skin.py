@@ -54,7 +54,7 @@ SCENE_CONTINUITY_4DX["fluid"]["smoothing_ratio"] = 4.0
 SCENE_CONTINUITY_3D = copy.deepcopy(SCENE_3D)
 SCENE_CONTINUITY_3D["physics"].update(ENGINEERING, density_diffusion="fourtakas")
 SCENE_CONTINUITY_3D["time"] = {"integrator": "verlet", "dt": "adaptive"}
-READ = ("particle_x", "particle_id", "particle_rho", "dfsph_neighbours", "dfsph_neighbour_count", "dfsph_control")
+READ = ("particle_x", "particle_id", "particle_rho", "neighbours", "neighbour_count", "control")
 
 
 def scene_of(base=SCENE, **changes):
@@ -83,13 +83,13 @@ def test_reused_lists_hold_every_pair_within_h_and_give_the_all_pairs_density(ba
         for step in range(1, 241):
             sim.advance(1)
             state = sim.backend.read(READ)  # (not sim.read(): a read of the state asks for a build)
-            builds = int(state["dfsph_control"][CONTROL_BUILDS])
+            builds = int(state["control"][CONTROL_BUILDS])
             since_build = 0 if builds != last_builds else since_build + 1
             last_builds = builds
-            if state["dfsph_control"][CONTROL_REBUILD] or step % 6:
+            if state["control"][CONTROL_REBUILD] or step % 6:
                 continue
             x = state["particle_x"][:, :2].astype(np.float64)
-            lists, count = list_entries(state, spec), state["dfsph_neighbour_count"]
+            lists, count = list_entries(state, spec), state["neighbour_count"]
             for i, expected in enumerate(neighbours(x, h, lo, hi)):
                 if count[i] > spec.MAX_NEIGHBOURS:
                     continue
@@ -123,7 +123,7 @@ def test_reused_lists_give_the_states_of_lists_built_every_step(base):
     for skin in (0.0, base["physics"]["list_skin"]):
         with Simulation(scene_of(base, **{"physics.list_skin": skin, "physics.precision": "float64"}), "vulkan") as sim:
             sim.advance(300)
-            builds[skin] = int(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS])
+            builds[skin] = int(sim.backend.read_buffer("control")[CONTROL_BUILDS])
             states[skin] = sim.read()
     plain, reused = states[0.0], states[base["physics"]["list_skin"]]
     assert builds[0.0] == 0 and 3 <= builds[base["physics"]["list_skin"]] <= 100, builds
@@ -141,7 +141,7 @@ def test_reused_lists_are_bitwise_the_same_on_both_backends(base):
     for backend in BACKENDS:
         with Simulation(scene_of(base), backend) as sim:
             sim.advance(150)
-            out[backend] = sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS], sim.read()
+            out[backend] = sim.backend.read_buffer("control")[CONTROL_BUILDS], sim.read()
     assert out["numba"][0] == out["vulkan"][0] > 1
     for name in ("particle_x", "particle_v", "particle_rho", "particle_p"):
         assert np.array_equal(out["numba"][1][name], out["vulkan"][1][name]), name
@@ -186,7 +186,7 @@ def test_numba_runs_the_sort_and_scan_at_builds_only_and_profiles_the_walk_apart
     profile = Profile()
     with Simulation(scene_of(), "numba", profile=profile) as sim:
         sim.step(120)
-        builds = int(sim.backend.read_buffer("dfsph_control")[CONTROL_BUILDS]) - 1  # (less the start's)
+        builds = int(sim.backend.read_buffer("control")[CONTROL_BUILDS]) - 1  # (less the start's)
     assert 2 <= builds < 60, builds
     assert profile.calls["compute_density"] == profile.calls["count_cells"] == builds
     assert profile.calls["compute_density (walk)"] == 120 - builds

@@ -73,8 +73,8 @@ OBSTACLE = {2: {"min": [0.16, 0.0], "max": [0.2, 0.04]}, 3: {"min": [0.14, 0.0, 
 FLOAT_RTOL = 1e-5
 FLOATS = ("particle_x", "particle_v", "particle_rho", "particle_p")
 # Integers, bit for bit: the sort's permutation, the grid's cells and counts, the lists' lengths
-INTEGERS = ("particle_id", "particle_cell", "cell_start", "grid_status", "dfsph_neighbour_count")
-# dfsph_control's words that both backends keep alike (the Vulkan host also keeps windows of recorded iterations:
+INTEGERS = ("particle_id", "particle_cell", "cell_start", "grid_status", "neighbour_count")
+# control's words that both backends keep alike (the Vulkan host also keeps windows of recorded iterations:
 # CONTROL_WINDOW, CONTROL_RUNNING; numba records none)
 CONTROL_WORDS = {"divergence iterations": CONTROL_ITERATIONS + SOLVE_DIVERGENCE,
                  "density iterations": CONTROL_ITERATIONS + SOLVE_DENSITY, "solver steps": CONTROL_STEP,
@@ -159,7 +159,7 @@ def differences(out, scene):
         if name in a:
             found[name] = ("int", bool(np.array_equal(a[name], b[name])))
     for name, word in CONTROL_WORDS.items():
-        found[name] = ("int", bool(a["dfsph_control"][word] == b["dfsph_control"][word]))
+        found[name] = ("int", bool(a["control"][word] == b["control"][word]))
     if log_a is not None:  # step, divergence iterations, density iterations, both converged
         found["solver log iterations"] = ("int", bool(np.array_equal(log_a[:, [0, 3, 5, 7]], log_b[:, [0, 3, 5, 7]])))
     pa, pb = in_particle_order(a, dim), in_particle_order(b, dim)

@@ -34,11 +34,11 @@ layout(std430, binding = 11) buffer ScratchX { real4 scratch_x[]; };  // LIST_SK
 layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
 layout(std430, binding = 15) writeonly buffer ParticleNeighbours { uvec2 particle_neighbours[]; };
 layout(std430, binding = 17) writeonly buffer ParticleDrho { real particle_drho[]; };
-layout(std430, binding = 29) buffer DfsphNeighbours { uint dfsph_neighbours[]; };
-layout(std430, binding = 29) buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks: dfsph.glsl)
-layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };  // LIST_SKIN: CONTROL_BUILDS
-layout(std430, binding = 30) buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };  // (unread: named by
+layout(std430, binding = 29) buffer Neighbours { uint neighbours[]; };
+layout(std430, binding = 29) buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks: dfsph.glsl)
+layout(std430, binding = 24) buffer Control { uint control[]; };  // LIST_SKIN: CONTROL_BUILDS
+layout(std430, binding = 30) buffer NeighbourCount { uint neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };  // (unread: named by
                                                                                            // neighbour_list.glsl)
 #include "neighbour_list.glsl"
 
@@ -71,7 +71,7 @@ uint listed_sum(uint i, real3 xi, real3 wall, uint count, inout real sum_w) {
         uint image;
         real3 r;
         sum_w += kernel_w(listed_distance(i, slot, chunk, xi, wall, j, image, r));
-        dfsph_neighbours[list_slot(i, slot - self_seen)] = j | (image << IMAGE_SHIFT);
+        neighbours[list_slot(i, slot - self_seen)] = j | (image << IMAGE_SHIFT);
         self_seen |= uint(j == i && image == 0u);
     }
     return count - self_seen;
@@ -143,7 +143,7 @@ void main() {
     if (walk) {  // [5] a reused list: self, and the listed particles and images now within h, in the list's order
                  //     (continuity: the others' rates, add_rate); a list that overflowed at its build scans the
                  //     cells of the build around x_built instead
-        count = dfsph_neighbour_count[i];
+        count = neighbour_count[i];
         scanning = count > MAX_NEIGHBOURS;
     }
     if (!scanning) {
@@ -184,7 +184,7 @@ void main() {
                 real3 r = xi - xk;
                 real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
                 if (listing) {  // (list first: every candidate into the next slot, kept by one within h)
-                    dfsph_neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
+                    neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
                     count += uint(r2 < P.h2);
                     continue;
                 }
@@ -200,9 +200,9 @@ void main() {
                             uint pair = j | (image << IMAGE_SHIFT);
                             if (CHUNKED) {
                                 chunk[count & 3u] = pair;
-                                if ((count & 3u) == 3u) dfsph_chunks[chunk_index(i, count)] = chunk;
+                                if ((count & 3u) == 3u) neighbour_chunks[chunk_index(i, count)] = chunk;
                             } else {
-                                dfsph_neighbours[list_slot(i, count)] = pair;
+                                neighbours[list_slot(i, count)] = pair;
                             }
                         }
                         count += 1u;
@@ -217,7 +217,7 @@ void main() {
     }
     if (listing) count = listed_sum(i, xi, wall, count, sum_w);
     uint kept = min(count, MAX_NEIGHBOURS);
-    if (CHUNKED && !walk && (kept & 3u) != 0u) dfsph_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
+    if (CHUNKED && !walk && (kept & 3u) != 0u) neighbour_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
     // [8] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
     //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;
@@ -235,8 +235,8 @@ void main() {
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;
     if (NEIGHBOUR_STATS) particle_neighbours[i] = uvec2(found, fingerprint);
-    if (MAX_NEIGHBOURS > 0u && !walk) dfsph_neighbour_count[i] = count;  // (longer than its slots: compute_forces
+    if (MAX_NEIGHBOURS > 0u && !walk) neighbour_count[i] = count;  // (longer than its slots: compute_forces
                                                                          // scans, DFSPH stops)
     if (LIST_SKIN > 0u && !walk) scratch_x[i] = particle_x[i];  // (where the list was built: integrate, the walks)
-    if (LIST_SKIN > 0u && !walk && i == 0u) dfsph_control[CONTROL_BUILDS] += 1u;
+    if (LIST_SKIN > 0u && !walk && i == 0u) control[CONTROL_BUILDS] += 1u;
 }

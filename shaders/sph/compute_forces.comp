@@ -30,11 +30,11 @@ layout(std430, binding = 4) readonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  // LIST_SKIN: x at the list's build
-layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };  // LIST_SKIN: CONTROL_REBUILD
-layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
-layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
-layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };  // (unread: named by
+layout(std430, binding = 24) buffer Control { uint control[]; };  // LIST_SKIN: CONTROL_REBUILD
+layout(std430, binding = 29) readonly buffer Neighbours { uint neighbours[]; };
+layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks)
+layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };  // (unread: named by
                                                                                            // neighbour_list.glsl)
 #include "neighbour_list.glsl"
 
@@ -63,9 +63,9 @@ void main() {
     // [5] with neighbour lists (Scene.spec_for), the list compute_density wrote from these
     //     positions this step (neighbour_list.glsl): the pairs of the scan below in its order, with the same
     //     terms as [8]-[10]. A particle with more neighbours than its list's slots is scanned instead
-    bool listed = MAX_NEIGHBOURS > 0u && dfsph_neighbour_count[i] <= MAX_NEIGHBOURS;
+    bool listed = MAX_NEIGHBOURS > 0u && neighbour_count[i] <= MAX_NEIGHBOURS;
     if (listed) {
-        uint count = dfsph_neighbour_count[i];
+        uint count = neighbour_count[i];
         uvec4 chunk = uvec4(0u);
         for (uint slot = 0u; slot < count; ++slot) {
             uint j;
@@ -148,5 +148,5 @@ void main() {
     // [12] store; reused lists: the next build is integrate's to ask for (every dispatch that reads the request
     //      has run: backends.plan)
     particle_a[i] = real4(a, 0.0);
-    if (LIST_SKIN > 0u && i == 0u) dfsph_control[CONTROL_REBUILD] = 0u;
+    if (LIST_SKIN > 0u && i == 0u) control[CONTROL_REBUILD] = 0u;
 }

@@ -12,12 +12,12 @@
 // the command buffer (no readback). The positions do not move from compute_density to integrate, so
 // compute_density's scan of the grid cells also writes each particle's neighbour list: its
 // neighbours and their wall and obstacle images within h, in the scan's order, as j | image << IMAGE_SHIFT
-// in dfsph_neighbours[list_slot(i, slot)] (slot < MAX_NEIGHBOURS: on Vulkan consecutive invocations read consecutive
-// words, or chunks of 4), their number in dfsph_neighbour_count[i]. dfsph_factor, every sweep of the solves and
+// in neighbours[list_slot(i, slot)] (slot < MAX_NEIGHBOURS: on Vulkan consecutive invocations read consecutive
+// words, or chunks of 4), their number in neighbour_count[i]. dfsph_factor, every sweep of the solves and
 // compute_forces walk that list (neighbour_list.glsl: listed_pair): the sums
 // run in the scan's order, with the same terms, over about a third (2D) or a seventh (3D) of the candidates.
 // The sweeps use each entry's g = V grad_i W_ij as dfsph_factor computes it (listed_gradient): with the
-// specialization constant GRADIENTS (numba) the factor stores it in dfsph_gradients[list_slot(i, slot)] and the
+// specialization constant GRADIENTS (numba) the factor stores it in neighbour_gradients[list_slot(i, slot)] and the
 // sweeps read it; else they compute it again. The same bits either way on numba and lavapipe (the NVIDIA
 // driver, which fuses multiply-adds where it likes, gives the two ways different last bits).
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
@@ -57,7 +57,7 @@ const uint SOLVE_WARM_START = 3u;       // P.level of dfsph_velocity's warm star
 const float WARM_START = 0.5;           // as SPlisHSPlasH: half the last pressure (a full one overshoots where
                                         // the flow decompresses, and the solve only ever adds pressure)
 
-// dfsph_control (uint): set by the host (max iterations), the stages and the check (dfsph_check.glsl)
+// control (uint): set by the host (max iterations), the stages and the check (dfsph_check.glsl)
 const uint CONTROL_DONE = 0u;           // [CONTROL_DONE + solve]: 1 once the solve has stopped this step
 const uint CONTROL_ITERATIONS = 2u;     // [CONTROL_ITERATIONS + solve]: its velocity updates this step
 const uint CONTROL_STEP = 5u;           // steps completed (the device's count: the history's row)
@@ -81,18 +81,18 @@ const uint CONTROL_REBUILD = 22u;       // the state equation's reused lists (LI
 const uint CONTROL_BUILDS = 23u;        // the builds so far (compute_density)
 const uint CONTROL_SIZE = 32u;
 
-const uint IMAGE_SHIFT = 29u;           // dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)
+const uint IMAGE_SHIFT = 29u;           // neighbours: j | image << IMAGE_SHIFT (n < 2^29)
 const uint NEIGHBOUR_MASK = (1u << IMAGE_SHIFT) - 1u;
 
 uint dispatch_base(uint solve) { return CONTROL_DISPATCH + 8u * (solve - 1u); }
 
-// The word of slot `slot` of particle i's list (and its entry of dfsph_gradients): slot-major on Vulkan, so
+// The word of slot `slot` of particle i's list (and its entry of neighbour_gradients): slot-major on Vulkan, so
 // that a work group's invocations touch consecutive words; particle-major with LIST_BY_PARTICLE (numba,
 // Scene.spec_for), so that one thread walks one particle's slots in order (the other layout on the other
 // backend was measured slower on both: H200 1 M particles 0.81 -> 1.31 ms a WCSPH step; numba 64,000
 // 13.8 -> 13.3 ms, DFSPH 9,600 particles 10.1 -> 9.2 ms). With LIST_CHUNKS (Vulkan's state equation) the
 // slot-major list is kept in chunks of 4 slots (chunk_index: chunk c of particle i is the 16 bytes at c n + i,
-// which the shaders also declare as dfsph_chunks, uvec4): the scan stores 4 entries at once, where the GPU
+// which the shaders also declare as neighbour_chunks, uvec4): the scan stores 4 entries at once, where the GPU
 // paid for each scattered word, and a walk loads them at once (neighbour_list.glsl: listed_word). Measured
 // on the H200 at 1 M particles: the state equation's step 0.81 -> 0.74 ms (compute_density 0.39 -> 0.34 ms),
 // DFSPH's 2.64 -> 2.70 ms in its stages (its sweeps read the lists ten times a step and were slower by

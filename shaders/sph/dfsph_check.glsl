@@ -8,7 +8,7 @@
 // dispatch nothing. One going on at the end of the host's window of recorded iterations clears the
 // predicate CONTROL_RUNNING (dfsph.glsl: windows). A solve stopped unconverged is counted and the first
 // one recorded (step, solve, error). The constant-density solve's stop ends the step: a row of dfsph_history.
-// Needs time_state, dfsph_control, dfsph_state, dfsph_history, dfsph_partial and the shared s_sum declared
+// Needs time_state, control, dfsph_state, dfsph_history, dfsph_partial and the shared s_sum declared
 // by the shader that includes this file (after dfsph.glsl).
 // Mirror: sphcore/sph/dfsph_check.py (same names, same statements).
 
@@ -28,40 +28,40 @@ void dfsph_check_decide(uint solve) {
     float error = float(total / real(P.n));
     if (solve == SOLVE_DIVERGENCE) error *= time_state[0].x > 0.0 ? time_state[0].x : P.dt;
     // stop: converged after the minimum iterations, or the budget spent
-    uint iterations = dfsph_control[CONTROL_ITERATIONS + solve];
+    uint iterations = control[CONTROL_ITERATIONS + solve];
     uint least = solve == SOLVE_DENSITY ? MIN_ITERATIONS_DENSITY : MIN_ITERATIONS_DIVERGENCE;
     bool converged = iterations >= least && error <= dfsph_state[STATE_TOLERANCE + solve];
-    if (!converged && iterations < dfsph_control[CONTROL_MAX_ITERATIONS]) {
+    if (!converged && iterations < control[CONTROL_MAX_ITERATIONS]) {
         // going on; at the end of a recorded window, the rest of the command buffer is skipped (dfsph.glsl)
-        uint window = dfsph_control[CONTROL_WINDOW + solve];
-        if (window > 0u && iterations > 0u && iterations % window == 0u) dfsph_control[CONTROL_RUNNING] = 0u;
+        uint window = control[CONTROL_WINDOW + solve];
+        if (window > 0u && iterations > 0u && iterations % window == 0u) control[CONTROL_RUNNING] = 0u;
         return;
     }
-    dfsph_control[CONTROL_DONE + solve] = 1u;
-    dfsph_control[dispatch_base(solve)] = 0u;
+    control[CONTROL_DONE + solve] = 1u;
+    control[dispatch_base(solve)] = 0u;
     dfsph_state[STATE_ERROR + solve] = error;
     // a solve that spent its budget unconverged: counted, the first one recorded
     if (!converged) {
-        dfsph_control[CONTROL_FAILURES] += 1u;
-        if (dfsph_control[CONTROL_FAILURES] == 1u) {
-            dfsph_control[CONTROL_FAILED_STEP] = dfsph_control[CONTROL_STEP] + 1u;
-            dfsph_control[CONTROL_FAILED_SOLVE] = solve;
+        control[CONTROL_FAILURES] += 1u;
+        if (control[CONTROL_FAILURES] == 1u) {
+            control[CONTROL_FAILED_STEP] = control[CONTROL_STEP] + 1u;
+            control[CONTROL_FAILED_SOLVE] = solve;
             dfsph_state[STATE_FAILED_ERROR] = error;
         }
     }
     // the constant-density solve ends the step: its history row, the step count
     if (solve != SOLVE_DENSITY) return;
-    uint step = dfsph_control[CONTROL_STEP] + 1u;
+    uint step = control[CONTROL_STEP] + 1u;
     uint row = (step - 1u) % HISTORY_ROWS * HISTORY_COLUMNS;
     float divergence_error = dfsph_state[STATE_ERROR + SOLVE_DIVERGENCE];
     bool both = converged && divergence_error <= dfsph_state[STATE_TOLERANCE + SOLVE_DIVERGENCE];
     dfsph_history[row] = float(step);
     dfsph_history[row + 1u] = time_state[0].x;
     dfsph_history[row + 2u] = time_state[0].z + time_state[0].w;
-    dfsph_history[row + 3u] = float(dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE]);
+    dfsph_history[row + 3u] = float(control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE]);
     dfsph_history[row + 4u] = divergence_error;
     dfsph_history[row + 5u] = float(iterations);
     dfsph_history[row + 6u] = error;
     dfsph_history[row + 7u] = both ? 1.0 : 0.0;
-    dfsph_control[CONTROL_STEP] = step;
+    control[CONTROL_STEP] = step;
 }

@@ -7,7 +7,7 @@
 // dispatches' work groups (one invocation per particle); every particle's
 // pressure is cleared and its stiffness sum scaled to the warm start (WARM_START). The sums walk the
 // particle's neighbour list, which compute_density's scan wrote; with GRADIENTS they store each entry's
-// V grad W_ij (dfsph_gradients) for the solves' sweeps, which then read it instead of computing the pair
+// V grad W_ij (neighbour_gradients) for the solves' sweeps, which then read it instead of computing the pair
 // again (dfsph.glsl). The sum of each particle's V grad W_ij goes to particle_gradient_sum (dfsph_residual).
 // Mirror: sphcore/sph/dfsph_factor.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
@@ -26,13 +26,13 @@ layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; 
 layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 4) writeonly buffer ParticleP { real particle_p[]; };
 layout(std430, binding = 22) writeonly buffer ParticleAlpha { real particle_alpha[]; };
-layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 24) buffer Control { uint control[]; };
 layout(std430, binding = 25) readonly buffer DfsphState { float dfsph_state[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
-layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
-layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
-layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) writeonly buffer DfsphGradients { real4 dfsph_gradients[]; };
+layout(std430, binding = 29) readonly buffer Neighbours { uint neighbours[]; };
+layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks)
+layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
+layout(std430, binding = 31) writeonly buffer NeighbourGradients { real4 neighbour_gradients[]; };
 layout(std430, binding = 19) writeonly buffer ParticleVh { real4 particle_gradient_sum[]; };  // (DFSPH: no Verlet)
 #include "neighbour_list.glsl"
 
@@ -41,15 +41,15 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     if (i == 0u) {
-        dfsph_control[CONTROL_DONE + SOLVE_DIVERGENCE] = 0u;
-        dfsph_control[CONTROL_DONE + SOLVE_DENSITY] = 0u;
-        dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0u;
-        dfsph_control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0u;
+        control[CONTROL_DONE + SOLVE_DIVERGENCE] = 0u;
+        control[CONTROL_DONE + SOLVE_DENSITY] = 0u;
+        control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0u;
+        control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0u;
         for (uint solve = SOLVE_DIVERGENCE; solve <= SOLVE_DENSITY; ++solve) {
             uint base = dispatch_base(solve);
-            dfsph_control[base] = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
-            dfsph_control[base + 1u] = 1u;
-            dfsph_control[base + 2u] = 1u;
+            control[base] = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
+            control[base + 1u] = 1u;
+            control[base + 2u] = 1u;
         }
     }
     // [2] own position; wall and obstacle images as in compute_density
@@ -65,7 +65,7 @@ void main() {
     real coef = real(P.pressure_coef) / real(P.rest_density);
     real3 sum_grad = real3(0.0);
     real sum_grad2 = real(0.0);
-    uint count = dfsph_neighbour_count[i];
+    uint count = neighbour_count[i];
     uvec4 chunk = uvec4(0u);
     for (uint slot = 0u; slot < min(count, MAX_NEIGHBOURS); ++slot) {
         // [4] the neighbour j, or its image, and the direction from it to i (neighbour_list.glsl)
@@ -79,7 +79,7 @@ void main() {
         real3 grad = g * r_hat;
         sum_grad -= grad;
         sum_grad2 += g * g;
-        if (GRADIENTS) dfsph_gradients[list_slot(i, slot)] = real4(-grad, 0.0);
+        if (GRADIENTS) neighbour_gradients[list_slot(i, slot)] = real4(-grad, 0.0);
     }
     // [5] alpha_i, relaxed; 0 for a particle (nearly) alone, whose residual is 0 anyway
     real s = sum_grad.x * sum_grad.x + sum_grad.y * sum_grad.y + sum_grad.z * sum_grad.z + sum_grad2;
@@ -94,6 +94,6 @@ void main() {
     particle_kappa[i] = real(WARM_START) * particle_kappa[i];
     // [7] a list too long for its MAX_NEIGHBOURS slots marks the step (the same value from every
     //     invocation that writes it), and the host stops the run
-    if (count > MAX_NEIGHBOURS && dfsph_control[CONTROL_OVERFLOW_STEP] == 0u)
-        dfsph_control[CONTROL_OVERFLOW_STEP] = dfsph_control[CONTROL_STEP] + 1u;
+    if (count > MAX_NEIGHBOURS && control[CONTROL_OVERFLOW_STEP] == 0u)
+        control[CONTROL_OVERFLOW_STEP] = control[CONTROL_STEP] + 1u;
 }

@@ -34,14 +34,14 @@ layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; }
 layout(std430, binding = 12) readonly buffer ScratchV { real4 particle_vstar[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 23) writeonly buffer ParticleResidual { real particle_residual[]; };
-layout(std430, binding = 24) coherent buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 24) coherent buffer Control { uint control[]; };
 layout(std430, binding = 25) buffer DfsphState { float dfsph_state[]; };
 layout(std430, binding = 26) writeonly buffer DfsphHistory { float dfsph_history[]; };
 layout(std430, binding = 28) coherent buffer DfsphPartial { real dfsph_partial[]; };
-layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
-layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
-layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };
+layout(std430, binding = 29) readonly buffer Neighbours { uint neighbours[]; };
+layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks)
+layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };
 layout(std430, binding = 19) readonly buffer ParticleVh { real4 particle_gradient_sum[]; };  // (DFSPH: no Verlet)
 #include "neighbour_list.glsl"
 
@@ -71,7 +71,7 @@ void main() {
         // [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
         real3 sum_g = particle_gradient_sum[i].xyz;
         real d = vi.x * sum_g.x + vi.y * sum_g.y + vi.z * sum_g.z;
-        uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+        uint count = min(neighbour_count[i], MAX_NEIGHBOURS);
         uvec4 chunk = uvec4(0u);
         for (uint slot = 0u; slot < count; ++slot) {
             // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
@@ -113,7 +113,7 @@ void main() {
         for (uint k = 0u; k < gl_WorkGroupSize.x; ++k) total += s_residual[k];
         dfsph_partial[gl_WorkGroupID.x] = total;
         memoryBarrierBuffer();
-        s_last = atomicAdd(dfsph_control[CONTROL_FINISHED], 1u) == groups - 1u;
+        s_last = atomicAdd(control[CONTROL_FINISHED], 1u) == groups - 1u;
         memoryBarrierBuffer();
     }
     barrier();
@@ -123,6 +123,6 @@ void main() {
     s_sum[lid] = dfsph_check_share(lid, groups);
     barrier();
     if (lid != 0u) return;
-    dfsph_control[CONTROL_FINISHED] = 0u;
+    control[CONTROL_FINISHED] = 0u;
     dfsph_check_decide(solve);
 }

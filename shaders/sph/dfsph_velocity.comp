@@ -31,12 +31,12 @@ layout(std430, binding = 12) writeonly buffer ScratchV { real4 particle_vstar[];
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 22) readonly buffer ParticleAlpha { real particle_alpha[]; };
 layout(std430, binding = 23) readonly buffer ParticleResidual { real particle_residual[]; };
-layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };
+layout(std430, binding = 24) buffer Control { uint control[]; };
 layout(std430, binding = 27) buffer ParticleKappa { real particle_kappa[]; };
-layout(std430, binding = 29) readonly buffer DfsphNeighbours { uint dfsph_neighbours[]; };
-layout(std430, binding = 29) readonly buffer DfsphChunks { uvec4 dfsph_chunks[]; };  // (the same, by chunks)
-layout(std430, binding = 30) readonly buffer DfsphNeighbourCount { uint dfsph_neighbour_count[]; };
-layout(std430, binding = 31) readonly buffer DfsphGradients { real4 dfsph_gradients[]; };
+layout(std430, binding = 29) readonly buffer Neighbours { uint neighbours[]; };
+layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks)
+layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
+layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };
 #include "neighbour_list.glsl"
 
 void main() {
@@ -46,7 +46,7 @@ void main() {
     if (i >= P.n) return;
     uint solve = P.level;
     bool warm = solve == SOLVE_WARM_START;  // the warm start: always, and not counted
-    if (!warm && i == 0u) dfsph_control[CONTROL_ITERATIONS + solve] += 1u;
+    if (!warm && i == 0u) control[CONTROL_ITERATIONS + solve] += 1u;
     // [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
     //     start: the stiffness sum, particle_kappa, where the particle is compressed: residual > 0)
     real dt = real(time_state[0].x);
@@ -61,7 +61,7 @@ void main() {
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
     real3 change = real3(0.0);
-    uint count = min(dfsph_neighbour_count[i], MAX_NEIGHBOURS);
+    uint count = min(neighbour_count[i], MAX_NEIGHBOURS);
     uvec4 chunk = uvec4(0u);
     for (uint slot = 0u; slot < count; ++slot) {
         // [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)

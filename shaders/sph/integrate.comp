@@ -20,7 +20,7 @@ layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  /
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 layout(std430, binding = 19) buffer ParticleVh { real4 particle_vh[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
-layout(std430, binding = 24) buffer DfsphControl { uint dfsph_control[]; };  // LIST_SKIN: CONTROL_REBUILD
+layout(std430, binding = 24) buffer Control { uint control[]; };  // LIST_SKIN: CONTROL_REBUILD
 
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
@@ -74,6 +74,6 @@ void main() {
     //     (every particle that has writes the same 1)
     if (LIST_SKIN > 0u) {
         real3 moved = x - scratch_x[i].xyz;
-        if (moved.x * moved.x + moved.y * moved.y + moved.z * moved.z > moved_limit2()) dfsph_control[CONTROL_REBUILD] = 1u;
+        if (moved.x * moved.x + moved.y * moved.y + moved.z * moved.z > moved_limit2()) control[CONTROL_REBUILD] = 1u;
     }
 }

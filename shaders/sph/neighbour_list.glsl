@@ -1,6 +1,6 @@
 // The neighbour lists (dfsph.glsl: written by compute_density's scan), walked by compute_forces, and under
 // DFSPH by dfsph_factor (which stores each entry's gradient), dfsph_residual and dfsph_velocity (which read
-// them). Needs particle_x, dfsph_neighbours, dfsph_chunks (the same buffer as uvec4) and dfsph_gradients
+// them). Needs particle_x, neighbours, neighbour_chunks (the same buffer as uvec4) and neighbour_gradients
 // declared by the shader that includes this file (after cells.glsl, kernels.glsl, pairs.glsl and dfsph.glsl).
 // A walk goes through the slots from 0 in order, keeping the last chunk it loaded in `chunk`.
 // Mirror: sphcore/sph/neighbour_list.py (same names, same statements).
@@ -8,8 +8,8 @@
 // Entry `slot` of particle i's list as written (j | image << IMAGE_SHIFT): lists in chunks (LIST_CHUNKS) are read
 // a chunk of 4 slots at a time, one 16-byte load at each fourth slot (dfsph.glsl: list_slot).
 uint listed_word(uint i, uint slot, inout uvec4 chunk) {
-    if (LIST_BY_PARTICLE || !LIST_CHUNKS) return dfsph_neighbours[list_slot(i, slot)];
-    if ((slot & 3u) == 0u) chunk = dfsph_chunks[chunk_index(i, slot)];
+    if (LIST_BY_PARTICLE || !LIST_CHUNKS) return neighbours[list_slot(i, slot)];
+    if ((slot & 3u) == 0u) chunk = neighbour_chunks[chunk_index(i, slot)];
     return lane_of(chunk, slot & 3u);
 }
 
@@ -37,7 +37,7 @@ real3 listed_pair(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, re
 }
 
 // Entry `slot` of particle i's list under DFSPH: its neighbour j (`image`: the walls it is mirrored across);
-// returns g = V grad_i W_ik. With GRADIENTS, as dfsph_factor stored it this step (dfsph_gradients, in the
+// returns g = V grad_i W_ik. With GRADIENTS, as dfsph_factor stored it this step (neighbour_gradients, in the
 // list's layout); else computed again as dfsph_factor computed it: the same bits without fused multiply-adds.
 real3 listed_gradient(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall, real3 inward, out uint j,
                       out uint image) {
@@ -45,7 +45,7 @@ real3 listed_gradient(uint i, uint slot, inout uvec4 chunk, real3 xi, real3 wall
         uint pair = listed_word(i, slot, chunk);
         j = pair & NEIGHBOUR_MASK;
         image = pair >> IMAGE_SHIFT;
-        return dfsph_gradients[list_slot(i, slot)].xyz;
+        return neighbour_gradients[list_slot(i, slot)].xyz;
     }
     real3 r;
     real r2;

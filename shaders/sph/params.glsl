@@ -36,5 +36,5 @@ layout(push_constant) uniform Params {
                           // sqrt(h / |a|max)), c^2 = k (choose_dt.comp). The block is now 128 bytes:
                           // lavapipe's maxPushConstantsSize; a field more must come from a buffer
     // -- pressure solver (issue 14): no field here (the block is full); fluid.max_density_error,
-    //    max_divergence_error and max_iterations reach the shaders in dfsph_state and dfsph_control
+    //    max_divergence_error and max_iterations reach the shaders in dfsph_state and control
 } P;

@@ -70,16 +70,16 @@ def compute_density(spec, real=np.float32):
     equation_of_state_ = equation_of_state(spec, real)
 
     @njit
-    def listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, count, sum_w):
+    def listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, count, sum_w):
         """Adds kernel_w over the `count` entries of i's list (a list-first scan's, self among them) to sum_w
         in the list's order, and takes self out of the list: returns (the others' count, sum_w)."""
         self_seen = 0
         chunk = (0, 0, 0, 0)
         for slot in range(count):
-            chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x,
+            chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, neighbours, i, slot, chunk, xi_x,
                                                                  xi_y, xi_z, wall_x, wall_y, wall_z)
             sum_w += kernel_w(P, r2)
-            dfsph_neighbours[list_slot(P, i, slot - self_seen)] = j | (image << IMAGE_SHIFT)
+            neighbours[list_slot(P, i, slot - self_seen)] = j | (image << IMAGE_SHIFT)
             self_seen |= int(j == i and image == 0)
         return count - self_seen, sum_w
 
@@ -111,8 +111,8 @@ def compute_density(spec, real=np.float32):
 
     @njit
     def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
-                             scratch_x, particle_id, particle_neighbours, obstacle_box, particle_drho, dfsph_control,
-                             dfsph_neighbours, dfsph_neighbour_count):
+                             scratch_x, particle_id, particle_neighbours, obstacle_box, particle_drho, control,
+                             neighbours, neighbour_count):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -166,12 +166,12 @@ def compute_density(spec, real=np.float32):
         if walk:  # [5] a reused list: self, and the listed particles and images now within h, in the list's order
             #         (continuity: the others' rates, add_rate); a list that overflowed at its build scans the
             #         cells of the build around x_built instead
-            count = int(dfsph_neighbour_count[i])
+            count = int(neighbour_count[i])
             scanning = count > MAX_NEIGHBOURS
         if not scanning:
             sum_w = kernel_w(P, real(0.0))
             for slot in range(count):
-                chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, dfsph_neighbours, i, slot, chunk,
+                chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, neighbours, i, slot, chunk,
                                                                      xi_x, xi_y, xi_z, wall_x, wall_y, wall_z)
                 if r2 >= P.h2:
                     continue
@@ -197,7 +197,7 @@ def compute_density(spec, real=np.float32):
                     start = int(cell_start[first])
                     end = int(cell_start[last]) + int(cell_pyramid[last])
                 if listing and count + (end - start) > MAX_NEIGHBOURS:  # the list may fill: summed now, and the
-                    count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y,
+                    count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y,
                                               wall_z, count, sum_w)  # rest scanned with the branch
                     listing = False
                 for j in range(start, end):
@@ -211,7 +211,7 @@ def compute_density(spec, real=np.float32):
                     r_z = xi_z - zk
                     r2 = r_x * r_x + r_y * r_y + r_z * r_z
                     if listing:  # (list first: every candidate into the next slot, kept by one within h)
-                        dfsph_neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
+                        neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
                         count += int(r2 < P.h2)
                         continue
                     within = r2 < P.h2
@@ -227,9 +227,9 @@ def compute_density(spec, real=np.float32):
                                 if CHUNKED:
                                     chunk = with_lane(chunk, count & 3, pair)
                                     if (count & 3) == 3:
-                                        store_chunk(P, dfsph_neighbours, i, count, chunk)
+                                        store_chunk(P, neighbours, i, count, chunk)
                                 else:
-                                    dfsph_neighbours[list_slot(P, i, count)] = pair
+                                    neighbours[list_slot(P, i, count)] = pair
                             count += 1
                     # [7] continuity: the rates of the others within h (add_rate: the velocity divergence, d rho_i/dt,
                     #     and the density diffusion D_i)
@@ -238,11 +238,11 @@ def compute_density(spec, real=np.float32):
                                                           r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
                                                           inward_x, inward_y, inward_z, sum_div, sum_diffusion)
         if listing:
-            count, sum_w = listed_sum(P, particle_x, dfsph_neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
+            count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                                       count, sum_w)
         kept = min(count, MAX_NEIGHBOURS)
         if CHUNKED and not walk and (kept & 3) != 0:
-            store_chunk(P, dfsph_neighbours, i, kept, chunk)  # (the last chunk's rest: unread)
+            store_chunk(P, neighbours, i, kept, chunk)  # (the last chunk's rest: unread)
         # [8] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
         #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w
@@ -265,11 +265,11 @@ def compute_density(spec, real=np.float32):
             particle_neighbours[i, 0] = found
             particle_neighbours[i, 1] = fingerprint
         if MAX_NEIGHBOURS > 0 and not walk:
-            dfsph_neighbour_count[i] = count  # (longer than its slots: compute_forces scans, DFSPH stops)
+            neighbour_count[i] = count  # (longer than its slots: compute_forces scans, DFSPH stops)
         if LIST_SKIN > 0 and not walk:
             for c in range(4):
                 scratch_x[i, c] = particle_x[i, c]  # (where the list was built: integrate, the walks)
         if LIST_SKIN > 0 and not walk and i == 0:
-            dfsph_control[CONTROL_BUILDS] += 1
+            control[CONTROL_BUILDS] += 1
 
     return launcher(compute_density_main)

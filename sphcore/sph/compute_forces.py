@@ -44,8 +44,8 @@ def compute_forces(spec, real=np.float32):
 
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
-                            cell_pyramid, cell_start, scratch_x, obstacle_box, dfsph_control, dfsph_neighbours,
-                            dfsph_neighbour_count):
+                            cell_pyramid, cell_start, scratch_x, obstacle_box, control, neighbours,
+                            neighbour_count):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -85,13 +85,13 @@ def compute_forces(spec, real=np.float32):
         # [5] with neighbour lists (Scene.spec_for), the list compute_density wrote from these
         #     positions this step (neighbour_list.glsl): the pairs of the scan below in its order, with the same
         #     terms as [8]-[10]. A particle with more neighbours than its list's slots is scanned instead
-        listed = MAX_NEIGHBOURS > 0 and int(dfsph_neighbour_count[i]) <= MAX_NEIGHBOURS
+        listed = MAX_NEIGHBOURS > 0 and int(neighbour_count[i]) <= MAX_NEIGHBOURS
         if listed:
-            count = int(dfsph_neighbour_count[i])
+            count = int(neighbour_count[i])
             chunk = (0, 0, 0, 0)
             for slot in range(count):
                 chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                    P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
+                    P, particle_x, neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                     inward_x, inward_y, inward_z)
                 if LIST_SKIN > 0 and r2 >= P.h2:
                     continue  # (a reused list holds pairs out to list_reach)
@@ -205,6 +205,6 @@ def compute_forces(spec, real=np.float32):
         particle_a[i, 2] = a_z
         particle_a[i, 3] = real(0.0)
         if LIST_SKIN > 0 and i == 0:
-            dfsph_control[CONTROL_REBUILD] = 0
+            control[CONTROL_REBUILD] = 0
 
     return launcher(compute_forces_main)

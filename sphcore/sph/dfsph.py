@@ -1,4 +1,4 @@
-"""DFSPH's state layout (physics.pressure_solver = "dfsph"): indices into dfsph_control, dfsph_state
+"""DFSPH's state layout (physics.pressure_solver = "dfsph"): indices into control, dfsph_state
 and dfsph_history, shared by the dfsph_* mirrors.
 
 Mirror of shaders/sph/dfsph.glsl: same names, same values (the step, the solves and their
@@ -13,7 +13,7 @@ SOLVE_DENSITY = 2  # P.level of the constant-density solve's stages
 SOLVE_WARM_START = 3  # P.level of dfsph_velocity's warm start of the constant-density solve
 WARM_START = 0.5  # as SPlisHSPlasH: half the last pressure
 
-# dfsph_control (uint32)
+# control (uint32)
 CONTROL_DONE = 0  # [CONTROL_DONE + solve]: 1 once the solve has stopped this step
 CONTROL_ITERATIONS = 2  # [CONTROL_ITERATIONS + solve]: its velocity updates this step
 CONTROL_STEP = 5  # steps completed (the device's count: the history's row)
@@ -30,7 +30,7 @@ CONTROL_DISPATCH = 16  # [dispatch_base(solve)]: the solve's indirect dispatch a
 CONTROL_REBUILD = 22  # the state equation's reused lists (LIST_SKIN): 1 where the next step builds them
 CONTROL_BUILDS = 23  # the builds so far (compute_density)
 CONTROL_SIZE = 32
-IMAGE_SHIFT = 29  # dfsph_neighbours: j | image << IMAGE_SHIFT (n < 2^29)
+IMAGE_SHIFT = 29  # neighbours: j | image << IMAGE_SHIFT (n < 2^29)
 NEIGHBOUR_MASK = (1 << IMAGE_SHIFT) - 1
 
 
@@ -64,19 +64,19 @@ def with_lane(chunk, lane, value):
 
 
 @njit
-def store_chunk(P, dfsph_neighbours, i, slot, chunk):
-    """GLSL `dfsph_chunks[chunk_index(i, slot)] = chunk`: the 4 words of the chunk that holds `slot`."""
+def store_chunk(P, neighbours, i, slot, chunk):
+    """GLSL `neighbour_chunks[chunk_index(i, slot)] = chunk`: the 4 words of the chunk that holds `slot`."""
     word = chunk_index(P, i, slot) * 4
     for lane in range(4):
-        dfsph_neighbours[word + lane] = chunk[lane]
+        neighbours[word + lane] = chunk[lane]
 
 
 @njit
-def load_chunk(P, dfsph_neighbours, i, slot):
-    """GLSL `dfsph_chunks[chunk_index(i, slot)]`: the 4 words of the chunk that holds `slot`, as a 4-tuple."""
+def load_chunk(P, neighbours, i, slot):
+    """GLSL `neighbour_chunks[chunk_index(i, slot)]`: the 4 words of the chunk that holds `slot`, as a 4-tuple."""
     word = chunk_index(P, i, slot) * 4
-    return (int(dfsph_neighbours[word]), int(dfsph_neighbours[word + 1]), int(dfsph_neighbours[word + 2]),
-            int(dfsph_neighbours[word + 3]))
+    return (int(neighbours[word]), int(neighbours[word + 1]), int(neighbours[word + 2]),
+            int(neighbours[word + 3]))
 
 
 @lru_cache(maxsize=None)

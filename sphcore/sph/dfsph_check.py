@@ -35,7 +35,7 @@ def dfsph_check(spec, real=np.float32):
         return sum
 
     @njit
-    def dfsph_check_decide(solve, local_size, params, time_state, dfsph_control, dfsph_state, dfsph_history, s_sum):
+    def dfsph_check_decide(solve, local_size, params, time_state, control, dfsph_state, dfsph_history, s_sum):
         """Invocation 0, once every share is in s_sum: the error, and the solve's stop."""
         P = params[0]
         # the shares in order, their mean: the error (divergence-free: times dt, the last step's, or P.dt
@@ -47,40 +47,40 @@ def dfsph_check(spec, real=np.float32):
         if solve == SOLVE_DIVERGENCE:
             error *= time_state[0, 0] if time_state[0, 0] > f32(0.0) else P.dt
         # stop: converged after the minimum iterations, or the budget spent
-        iterations = dfsph_control[CONTROL_ITERATIONS + solve]
+        iterations = control[CONTROL_ITERATIONS + solve]
         least = MIN_ITERATIONS_DENSITY if solve == SOLVE_DENSITY else MIN_ITERATIONS_DIVERGENCE
         converged = iterations >= least and error <= dfsph_state[STATE_TOLERANCE + solve]
-        if not converged and iterations < dfsph_control[CONTROL_MAX_ITERATIONS]:
+        if not converged and iterations < control[CONTROL_MAX_ITERATIONS]:
             # going on; at the end of a recorded window, the rest of the command buffer is skipped (dfsph.py)
-            window = dfsph_control[CONTROL_WINDOW + solve]
+            window = control[CONTROL_WINDOW + solve]
             if window > 0 and iterations > 0 and iterations % window == 0:
-                dfsph_control[CONTROL_RUNNING] = 0
+                control[CONTROL_RUNNING] = 0
             return
-        dfsph_control[CONTROL_DONE + solve] = 1
-        dfsph_control[dispatch_base(solve)] = 0
+        control[CONTROL_DONE + solve] = 1
+        control[dispatch_base(solve)] = 0
         dfsph_state[STATE_ERROR + solve] = error
         # a solve that spent its budget unconverged: counted, the first one recorded
         if not converged:
-            dfsph_control[CONTROL_FAILURES] += 1
-            if dfsph_control[CONTROL_FAILURES] == 1:
-                dfsph_control[CONTROL_FAILED_STEP] = dfsph_control[CONTROL_STEP] + 1
-                dfsph_control[CONTROL_FAILED_SOLVE] = solve
+            control[CONTROL_FAILURES] += 1
+            if control[CONTROL_FAILURES] == 1:
+                control[CONTROL_FAILED_STEP] = control[CONTROL_STEP] + 1
+                control[CONTROL_FAILED_SOLVE] = solve
                 dfsph_state[STATE_FAILED_ERROR] = error
         # the constant-density solve ends the step: its history row, the step count
         if solve != SOLVE_DENSITY:
             return
-        step = dfsph_control[CONTROL_STEP] + 1
+        step = control[CONTROL_STEP] + 1
         row = (step - 1) % HISTORY_ROWS
         divergence_error = dfsph_state[STATE_ERROR + SOLVE_DIVERGENCE]
         both = converged and divergence_error <= dfsph_state[STATE_TOLERANCE + SOLVE_DIVERGENCE]
         dfsph_history[row, 0] = f32(step)
         dfsph_history[row, 1] = time_state[0, 0]
         dfsph_history[row, 2] = time_state[0, 2] + time_state[0, 3]
-        dfsph_history[row, 3] = f32(dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE])
+        dfsph_history[row, 3] = f32(control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE])
         dfsph_history[row, 4] = divergence_error
         dfsph_history[row, 5] = f32(iterations)
         dfsph_history[row, 6] = error
         dfsph_history[row, 7] = f32(1.0) if both else f32(0.0)
-        dfsph_control[CONTROL_STEP] = step
+        control[CONTROL_STEP] = step
 
     return dfsph_check_share, dfsph_check_decide

@@ -33,22 +33,22 @@ def dfsph_factor(spec, real=np.float32):
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,
-                          particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours,
-                          dfsph_neighbour_count, dfsph_gradients, particle_gradient_sum):
+                          particle_alpha, control, dfsph_state, particle_kappa, neighbours,
+                          neighbour_count, neighbour_gradients, particle_gradient_sum):
         P = params[0]
         # [1] one invocation per particle; invocation 0 also starts the step's solves
         if i >= P.n:
             return
         if i == 0:
-            dfsph_control[CONTROL_DONE + SOLVE_DIVERGENCE] = 0
-            dfsph_control[CONTROL_DONE + SOLVE_DENSITY] = 0
-            dfsph_control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0
-            dfsph_control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0
+            control[CONTROL_DONE + SOLVE_DIVERGENCE] = 0
+            control[CONTROL_DONE + SOLVE_DENSITY] = 0
+            control[CONTROL_ITERATIONS + SOLVE_DIVERGENCE] = 0
+            control[CONTROL_ITERATIONS + SOLVE_DENSITY] = 0
             for solve in range(SOLVE_DIVERGENCE, SOLVE_DENSITY + 1):
                 base = dispatch_base(solve)
-                dfsph_control[base] = (P.n + local_size - 1) // local_size
-                dfsph_control[base + 1] = 1
-                dfsph_control[base + 2] = 1
+                control[base] = (P.n + local_size - 1) // local_size
+                control[base + 1] = 1
+                control[base + 2] = 1
         # [2] own position; wall and obstacle images as in compute_density
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
@@ -65,12 +65,12 @@ def dfsph_factor(spec, real=np.float32):
         sum_grad_y = real(0.0)
         sum_grad_z = real(0.0)
         sum_grad2 = real(0.0)
-        count = int(dfsph_neighbour_count[i])
+        count = int(neighbour_count[i])
         chunk = (0, 0, 0, 0)
         for slot in range(min(count, MAX_NEIGHBOURS)):
             # [4] the neighbour j, or its image, and the direction from it to i (neighbour_list.glsl)
             chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                P, particle_x, dfsph_neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+                P, particle_x, neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
                 inward_y, inward_z)
             g = coef * pair_gradient(P, r2, rlen, image)
             grad_x = g * r_hat_x
@@ -82,10 +82,10 @@ def dfsph_factor(spec, real=np.float32):
             sum_grad2 += g * g
             if GRADIENTS:
                 k = list_slot(P, i, slot)
-                dfsph_gradients[k, 0] = -grad_x
-                dfsph_gradients[k, 1] = -grad_y
-                dfsph_gradients[k, 2] = -grad_z
-                dfsph_gradients[k, 3] = real(0.0)
+                neighbour_gradients[k, 0] = -grad_x
+                neighbour_gradients[k, 1] = -grad_y
+                neighbour_gradients[k, 2] = -grad_z
+                neighbour_gradients[k, 3] = real(0.0)
         # [5] alpha_i, relaxed; 0 for a particle (nearly) alone, whose residual is 0 anyway
         s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
         alpha = real(0.0)
@@ -103,17 +103,17 @@ def dfsph_factor(spec, real=np.float32):
         particle_kappa[i] = real(WARM_START) * particle_kappa[i]
         # [7] a list too long for its MAX_NEIGHBOURS slots marks the step (the same value from every
         #     invocation that writes it), and the host stops the run
-        if count > MAX_NEIGHBOURS and dfsph_control[CONTROL_OVERFLOW_STEP] == 0:
-            dfsph_control[CONTROL_OVERFLOW_STEP] = dfsph_control[CONTROL_STEP] + 1
+        if count > MAX_NEIGHBOURS and control[CONTROL_OVERFLOW_STEP] == 0:
+            control[CONTROL_OVERFLOW_STEP] = control[CONTROL_STEP] + 1
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_p, obstacle_box,
-               particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours, dfsph_neighbour_count,
-               dfsph_gradients, particle_gradient_sum):
+               particle_alpha, control, dfsph_state, particle_kappa, neighbours, neighbour_count,
+               neighbour_gradients, particle_gradient_sum):
         for group in prange(n_groups):
             for lid in range(local_size):
                 dfsph_factor_main(group * local_size + lid, local_size, params, particle_x, particle_p, obstacle_box,
-                                  particle_alpha, dfsph_control, dfsph_state, particle_kappa, dfsph_neighbours,
-                                  dfsph_neighbour_count, dfsph_gradients, particle_gradient_sum)
+                                  particle_alpha, control, dfsph_state, particle_kappa, neighbours,
+                                  neighbour_count, neighbour_gradients, particle_gradient_sum)
 
     return cached(launch)

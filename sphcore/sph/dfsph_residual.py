@@ -1,6 +1,6 @@
 """DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
 rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, each gradient as dfsph_factor computes it
-(stored in dfsph_gradients with GRADIENTS), summed as v_i . G_i - sum_j V v_j . grad W_ij with dfsph_factor's
+(stored in neighbour_gradients with GRADIENTS), summed as v_i . G_i - sum_j V v_j . grad W_ij with dfsph_factor's
 G_i = sum_j V grad W_ij (particle_gradient_sum); divergence-free solve
 r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a (in
 scratch_v: dfsph_predict, dfsph_velocity);
@@ -38,7 +38,7 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box, time_state,
-                            particle_residual, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
+                            particle_residual, neighbours, neighbour_count, neighbour_gradients,
                             particle_gradient_sum):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
@@ -65,12 +65,12 @@ def dfsph_residual(spec, real=np.float32):
         sum_g_y = particle_gradient_sum[i, 1]
         sum_g_z = particle_gradient_sum[i, 2]
         d = vi_x * sum_g_x + vi_y * sum_g_y + vi_z * sum_g_z
-        count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        count = min(int(neighbour_count[i]), MAX_NEIGHBOURS)
         chunk = (0, 0, 0, 0)
         for slot in range(count):
             # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
             #     g = V grad_i W_ik (neighbour_list.glsl)
-            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot,
+            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, neighbours, neighbour_gradients, i, slot,
                                                              chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
                                                              inward_y, inward_z)
             # [6] the neighbour's velocity; an image's mirrored on the flipped axes
@@ -105,16 +105,16 @@ def dfsph_residual(spec, real=np.float32):
 
     @njit(parallel=True, error_model="numpy")
     def launch(n_groups, local_size, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box,
-               time_state, particle_residual, dfsph_partial, dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients,
-               dfsph_control, dfsph_state, dfsph_history, particle_gradient_sum):
+               time_state, particle_residual, dfsph_partial, neighbours, neighbour_count, neighbour_gradients,
+               control, dfsph_state, dfsph_history, particle_gradient_sum):
         groups = (int(params[0].n) + local_size - 1) // local_size
         for group in prange(n_groups):
             s_residual = np.empty(local_size, real)  # the group's shared memory
             for lid in range(local_size):
                 s_residual[lid] = dfsph_residual_main(group * local_size + lid, params, particle_x, particle_v,
                                                       particle_vstar, particle_rho, obstacle_box, time_state,
-                                                      particle_residual, dfsph_neighbours, dfsph_neighbour_count,
-                                                      dfsph_gradients, particle_gradient_sum)
+                                                      particle_residual, neighbours, neighbour_count,
+                                                      neighbour_gradients, particle_gradient_sum)
             # (barrier)
             dfsph_residual_partial(group, local_size, dfsph_partial, s_residual)
         if n_groups == 0:
@@ -126,7 +126,7 @@ def dfsph_residual(spec, real=np.float32):
         for lid in range(local_size):
             s_sum[lid] = dfsph_check_share(lid, groups, local_size, dfsph_partial)
         # (barrier)
-        dfsph_check_decide(int(params[0].level), local_size, params, time_state, dfsph_control, dfsph_state,
+        dfsph_check_decide(int(params[0].level), local_size, params, time_state, control, dfsph_state,
                            dfsph_history, s_sum)
 
     return cached(launch)

@@ -1,6 +1,6 @@
 """One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
 -sum_j V (s_i + s_j) grad W_ij over its neighbour list, each gradient as dfsph_factor computes it (stored in
-dfsph_gradients with GRADIENTS), s_j = alpha_j r_j (divergence-free)
+neighbour_gradients with GRADIENTS), s_j = alpha_j r_j (divergence-free)
 or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
 with the pressure accumulated and v* = v + dt a kept in scratch_v for the next residual (constant density,
 dfsph_predict). Dispatched indirectly: no work groups once the solve has stopped
@@ -30,8 +30,8 @@ def dfsph_velocity(spec, real=np.float32):
 
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
-                            time_state, particle_alpha, particle_residual, dfsph_control, particle_kappa,
-                            dfsph_neighbours, dfsph_neighbour_count, dfsph_gradients, particle_vstar):
+                            time_state, particle_alpha, particle_residual, control, particle_kappa,
+                            neighbours, neighbour_count, neighbour_gradients, particle_vstar):
         P = params[0]
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
         #     invocation 0 counts the update
@@ -40,7 +40,7 @@ def dfsph_velocity(spec, real=np.float32):
         solve = int(P.level)
         warm = solve == SOLVE_WARM_START  # the warm start: always, and not counted
         if not warm and i == 0:
-            dfsph_control[CONTROL_ITERATIONS + solve] += 1
+            control[CONTROL_ITERATIONS + solve] += 1
         # [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
         #     start: the stiffness sum, particle_kappa, where the particle is compressed: residual > 0)
         dt = real(time_state[0, 0])
@@ -59,11 +59,11 @@ def dfsph_velocity(spec, real=np.float32):
         change_x = real(0.0)
         change_y = real(0.0)
         change_z = real(0.0)
-        count = min(int(dfsph_neighbour_count[i]), MAX_NEIGHBOURS)
+        count = min(int(neighbour_count[i]), MAX_NEIGHBOURS)
         chunk = (0, 0, 0, 0)
         for slot in range(count):
             # [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
-            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, dfsph_neighbours, dfsph_gradients, i, slot,
+            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, neighbours, neighbour_gradients, i, slot,
                                                              chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
                                                              inward_y, inward_z)
             # [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood

@@ -28,7 +28,7 @@ def integrate(spec, real=np.float32):
 
     @njit
     def integrate_main(i, params, particle_x, particle_v, particle_a, scratch_x, obstacle_box, particle_vh, time_state,
-                       dfsph_control):
+                       control):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -112,5 +112,5 @@ def integrate(spec, real=np.float32):
             moved_y = x_y - scratch_x[i, 1]
             moved_z = x_z - scratch_x[i, 2]
             if moved_x * moved_x + moved_y * moved_y + moved_z * moved_z > moved_limit2(P):
-                dfsph_control[CONTROL_REBUILD] = 1
+                control[CONTROL_REBUILD] = 1
     return launcher(integrate_main)
