@@ -70,7 +70,7 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0):
         config = {"physics": {"equation_of_state": "tait"},
                   "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [2 * block + spacing, 1.5 * block, block + spacing]},
                   "fluid": {"stiffness": 900.0, "viscosity": 0.5}, "time": {"dt": 5e-5}}
-    config["physics"] = {**config.get("physics", {}), "dimension": dim, "neighbour_search": search}
+    config["physics"] = {"model": "graphics", **config.get("physics", {}), "dimension": dim, "neighbour_search": search}
     if list_skin:
         config["physics"]["list_skin"] = list_skin
     config["name"] = f"bench_{dim}d_{search}_{n}"

@@ -3,10 +3,11 @@ render the surface. Run it from anywhere: `python examples/quickstart.py` (write
 import sphcore
 
 # A scene: a shipped one by name (sphcore.Scene.load("dam_break_3d")), a .toml file, or a dict
-# that names only what differs from the defaults (`sphcore keys` lists them all).
+# that names only what differs from the defaults (`sphcore keys` lists them all). physics.model
+# picks the model: "graphics" is the fast one; the default, "engineering", the accurate one.
 scene = sphcore.Scene.from_dict({
     "name": "quickstart",
-    "physics": {"dimension": 3, "equation_of_state": "tait"},
+    "physics": {"model": "graphics", "dimension": 3, "equation_of_state": "tait"},
     "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.4, 0.25, 0.12]},
     "fluid": {"blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.12, 0.16, 0.12]}],
               "spacing": 0.01, "stiffness": 900.0, "viscosity": 0.5},

@@ -16,9 +16,9 @@ __version__ = "0.1.0"
 
 # public name -> the module that defines it
 _PUBLIC = {
-    "Scene": "sphcore.scene", "SceneError": "sphcore.scene",
-    "Simulation": "sphcore.simulation", "SimulationError": "sphcore.simulation",
-    "run": "sphcore.simulation", "resume": "sphcore.simulation",
+    "Scene": "sphcore.scene", "SceneError": "sphcore.errors",
+    "Simulation": "sphcore.stepper", "SimulationError": "sphcore.errors",
+    "run": "sphcore.runner", "resume": "sphcore.runner",
     "SnapshotSeries": "sphcore.output",
     "marching_cubes": "sphcore.surface", "particle_surface": "sphcore.surface",
     "render_mesh": "sphcore.render",

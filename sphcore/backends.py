@@ -1,7 +1,7 @@
 """The two ways to run the shaders: their numba mirrors (default) and Vulkan.
 
-Both execute the same plan, an ordered list of stages (`plan`), over the same buffers bound
-at the same binding numbers (`BUFFERS`), with the same parameter bytes and the same
+Both execute the same plan, an ordered list of stages (sphcore.plan: `plan`), over the same buffers
+bound at the same binding numbers (`BUFFERS`), with the same parameter bytes and the same
 specialization constants (`Scene.spec`).
 
 With the grid, every step starts by sorting the particles by cell (a counting sort through a
@@ -14,275 +14,30 @@ buffers and of the arithmetic on them: Vulkan builds the shaders with SPHCORE_FL
 """
 import math
 import time
-from collections import namedtuple
 
 import numpy as np
 
-from sphcore.params import MAX_OBSTACLES, SHADER_DIR, pyramid_levels
-from sphcore.sph.apply_order import apply_order
-from sphcore.sph.cell_offsets import cell_offsets
-from sphcore.sph.choose_dt import choose_dt
-from sphcore.sph.clear_cells import clear_cells
+from sphcore.params import DISPATCH_DTYPE, PARAMS_BINDING, SHADER_DIR, UNIFORM_BYTES
+from sphcore.plan import BUFFERS, STAGES, STATUS_CLEAR, buffer_dtype
+from sphcore.plan import (PARTICLE_BUFFERS, PRECISIONS, REAL, buffer_length, empty_state,  # noqa: F401 (the plan
+                          in_particle_order, list_entries, neighbour_stages, plan)  # and buffers' old paths)
+from sphcore.solvers.dfsph import dfsph_solve
 from sphcore.sph.compute_density import can_list_first, compute_density
-from sphcore.sph.compute_forces import compute_forces
-from sphcore.sph.count_cells import count_cells
-from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_REBUILD, CONTROL_RUNNING, CONTROL_SIZE, CONTROL_STEP,
-                               CONTROL_WINDOW, HISTORY_ROWS, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
-                               SOLVE_WARM_START, dispatch_base, list_width)
-from sphcore.sph.dfsph_factor import dfsph_factor
-from sphcore.sph.dfsph_predict import dfsph_predict
-from sphcore.sph.dfsph_residual import dfsph_residual
-from sphcore.sph.dfsph_velocity import dfsph_velocity
-from sphcore.sph.gather_particles import gather_particles
-from sphcore.sph.integrate import integrate
-from sphcore.sph.integrate_density import integrate_density
-from sphcore.sph.reduce_cells import reduce_cells
-from sphcore.sph.reduce_dt import reduce_dt
-from sphcore.sph.scatter_particles import scatter_particles
-from sphcore.sph.sort_cells import sort_cells
+from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_REBUILD, CONTROL_RUNNING, CONTROL_STEP, CONTROL_WINDOW,
+                               HISTORY_ROWS, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE, dispatch_base, list_width)
+from sphcore.stage import ALWAYS, BUILD, REUSE, Stage
+from sphcore.vk_runner import Context, VulkanError, compile_glsl
 from sphcore.vk_runner.context import STAGING_KEPT
 from sphcore.workgroups import group_count
-
-REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
-PRECISIONS = ("float32", "float64")
-
-# binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | "neighbours"
-# (DFSPH's list slots) | count)
-BUFFERS = {
-    "particle_x": (REAL, 4, "particles"),
-    "particle_v": (REAL, 4, "particles"),
-    "particle_a": (REAL, 4, "particles"),
-    "particle_rho": (REAL, 1, "particles"),
-    "particle_p": (REAL, 1, "particles"),
-    "particle_id": (np.uint32, 1, "particles"),
-    "particle_cell": (np.uint32, 1, "particles"),
-    "particle_slot": (np.uint32, 1, "particles"),
-    "cell_pyramid": (np.uint32, 1, "pyramid"),
-    "cell_start": (np.uint32, 1, "cells"),
-    "sorted_index": (np.uint32, 1, "particles"),
-    "scratch_x": (REAL, 4, "particles"),
-    "scratch_v": (REAL, 4, "particles"),
-    "scratch_id": (np.uint32, 1, "particles"),
-    "grid_status": (np.uint32, 1, 4),
-    "particle_neighbours": (np.uint32, 2, "particles"),
-    "obstacle_box": (np.float32, 4, 2 * MAX_OBSTACLES),
-    "particle_drho": (REAL, 1, "particles"),
-    "scratch_rho": (REAL, 1, "particles"),
-    "particle_vh": (REAL, 4, "particles"),
-    "time_state": (np.float32, 4, 1),
-    "dt_partial": (REAL, 2, "particles"),
-    "particle_alpha": (REAL, 1, "particles"),
-    "particle_residual": (REAL, 1, "particles"),
-    "control": (np.uint32, 1, CONTROL_SIZE),
-    "dfsph_state": (np.float32, 1, 8),
-    "dfsph_history": (np.float32, 8, 256),
-    "particle_kappa": (REAL, 1, "particles"),
-    "dfsph_partial": (REAL, 1, "particles"),
-    "neighbours": (np.uint32, 1, "neighbours"),
-    "neighbour_count": (np.uint32, 1, "particles"),
-    "neighbour_gradients": (REAL, 4, "gradients"),
-}
-# particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
-# (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
-# particle_alpha, particle_residual: DFSPH's factor alpha_i and the residual r_i of the solve in progress;
-# scratch_v, the sort's scratch, holds v* = v + dt a during DFSPH's constant-density solve (dfsph_predict);
-# dfsph_partial: the sum of each dfsph_residual work group's residuals (as many as particles: local size 1);
-# neighbours, neighbour_count: each particle's neighbour list for the solves' sweeps, written by
-# dfsph_factor (spec.MAX_NEIGHBOURS slots a particle, rounded up to whole chunks of 4, dfsph.list_width:
-# "neighbours" is n times that, at least 1 word);
-# neighbour_gradients: with spec.GRADIENTS (DFSPH on numba), each list entry's V grad_i W, which dfsph_factor
-# writes in the list's layout: a pair's distance, direction and kernel are computed once a step, not in every
-# sweep ("gradients" is as long as "neighbours" then, else 1).
-# control, dfsph_state, dfsph_history: its iteration control, tolerances and errors, and one row per
-# step (layouts in shaders/sph/dfsph.glsl; physics.pressure_solver = "dfsph").
-# particle_vh: time.integrator = "verlet"'s half-step velocity v_{n+1/2} (shaders/sph/integrators.glsl); under
-# DFSPH, which never runs Verlet, the sum of a particle's list entries' V grad_i W (dfsph_factor writes it,
-# dfsph_residual reads it: particle_gradient_sum there).
-# time_state: (dt, the last step's dt, time hi, time lo) written on the device by choose_dt (with
-# time.dt = "adaptive" or "verlet"; zero at the start); the time is hi + lo (a compensated float32 sum).
-# dt_partial: reduce_dt's largest (|v|^2, |a|^2) per work group (as many as particles: local size 1).
-# grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
-# [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
-# obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
-# spec.OBSTACLES pairs are read (float32, like the parameter block's walls).
-STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
-
-# stage -> (mirror factory, invocations: "particles" | "cells" | "nodes", buffers its shader binds in order)
-STAGES = {
-    "clear_cells": (clear_cells, "cells", ("cell_pyramid",)),
-    "count_cells": (count_cells, "particles", ("particle_x", "particle_id", "particle_cell", "particle_slot",
-                                               "cell_pyramid", "grid_status")),
-    "reduce_cells": (reduce_cells, "nodes", ("cell_pyramid",)),
-    "cell_offsets": (cell_offsets, "cells", ("cell_pyramid", "cell_start", "grid_status")),
-    "scatter_particles": (scatter_particles, "particles", ("particle_cell", "particle_slot", "cell_start",
-                                                           "sorted_index")),
-    "sort_cells": (sort_cells, "cells", ("cell_pyramid", "cell_start", "sorted_index")),
-    "gather_particles": (gather_particles, "particles", ("particle_x", "particle_v", "particle_id", "sorted_index",
-                                                         "scratch_x", "scratch_v", "scratch_id", "particle_rho",
-                                                         "scratch_rho", "particle_a", "particle_vh",
-                                                         "particle_kappa")),
-    "apply_order": (apply_order, "particles", ("particle_x", "particle_v", "particle_id", "scratch_x",
-                                               "scratch_v", "scratch_id", "particle_rho", "scratch_rho",
-                                               "particle_a", "particle_vh", "particle_kappa")),
-    "compute_density": (compute_density, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
-                                                       "cell_pyramid", "cell_start", "scratch_x", "particle_id",
-                                                       "particle_neighbours", "obstacle_box", "particle_drho",
-                                                       "control", "neighbours", "neighbour_count")),
-    "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "particle_p", "cell_pyramid", "cell_start", "scratch_x",
-                                                     "obstacle_box", "control", "neighbours",
-                                                     "neighbour_count")),
-    "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
-    "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
-    "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
-                                                 "control", "dfsph_state", "particle_kappa", "neighbours",
-                                                 "neighbour_count", "neighbour_gradients", "particle_vh")),
-    "dfsph_predict": (dfsph_predict, "particles", ("particle_v", "particle_a", "scratch_v", "time_state")),
-    "dfsph_residual": (dfsph_residual, "particles", ("particle_x", "particle_v", "scratch_v", "particle_rho",
-                                                     "obstacle_box", "time_state", "particle_residual",
-                                                     "dfsph_partial", "neighbours", "neighbour_count",
-                                                     "neighbour_gradients", "control", "dfsph_state",
-                                                     "dfsph_history", "particle_vh")),
-    "dfsph_velocity": (dfsph_velocity, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "particle_p", "obstacle_box", "time_state", "particle_alpha",
-                                                     "particle_residual", "control", "particle_kappa",
-                                                     "neighbours", "neighbour_count", "neighbour_gradients",
-                                                     "scratch_v")),
-    "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "scratch_x", "obstacle_box",
-                                           "particle_vh", "time_state", "control")),
-    "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
-                                                           "time_state")),
-}
-
-Stage = namedtuple("Stage", "name level indirect when")  # level: the HistoPyramid level a reduce_cells builds,
-#   the solve of a DFSPH stage (dfsph.glsl: 1 divergence-free, 2 constant density), compute_density's walk of
-#   reused lists (1), else 0; indirect: its work groups are read from control when it runs (indirect_offset),
-#   as vkCmdDispatchIndirect does; when: with reused lists (spec.LIST_SKIN), BUILD for a stage that runs only at a
-#   build of the lists, REUSE only between builds, as control[CONTROL_REBUILD] says when it runs (on Vulkan
-#   by conditional rendering), else ALWAYS
-ALWAYS, BUILD, REUSE = 0, 1, 2
-Stage.__new__.__defaults__ = (0, False, ALWAYS)
-
 
 def profile_name(stage):
     """A stage's row in a profile: its name, "compute_density (walk)" for the walk of reused lists."""
     return stage.name + (" (walk)" if stage.when == REUSE else "")
 
 
-def neighbour_stages(cell_total):
-    """The grid's stages: count particles per cell, reduce the pyramid, offsets, sort."""
-    levels = pyramid_levels(cell_total)[0]
-    return ([Stage("clear_cells"), Stage("count_cells")]
-            + [Stage("reduce_cells", level) for level in range(1, levels + 1)]
-            + [Stage("cell_offsets"), Stage("scatter_particles"), Stage("sort_cells"),
-               Stage("gather_particles"), Stage("apply_order")])
-
-
-def plan(scene):
-    """The ordered stages one time step of `scene` runs; both backends execute this list with
-    the specialization constants `scene.spec` (a disabled term is compiled out of its shader)."""
-    spec = scene.spec
-    stages = neighbour_stages(int(np.prod(scene.grid_dim))) if spec.GRID else []
-    stages += [Stage("compute_density")]
-    # lists reused between builds (physics.list_skin): the sort and the scan only at a build, else the walk
-    # (compute_density at level 1); compute_forces clears the request that integrate sets (cells.glsl)
-    if spec.LIST_SKIN:
-        stages = [s._replace(when=BUILD) for s in stages] + [Stage("compute_density", 1, when=REUSE)]
-    stages += [Stage("integrate_density")] if spec.CONTINUITY else []  # the density is state (continuity)
-    # DFSPH (physics.pressure_solver = "dfsph"): the factor and the divergence-free solve before the forces,
-    # the constant-density solve once the step's dt is known (dfsph.glsl)
-    iterations = scene["fluid.max_iterations"]
-    stages += [Stage("dfsph_factor")] + dfsph_solve(SOLVE_DIVERGENCE, iterations) if spec.DFSPH else []
-    stages += [Stage("compute_forces")]
-    # the step's dt on the device (time.dt = "adaptive"), and the last step's for Verlet
-    stages += [Stage("reduce_dt")] if spec.ADAPTIVE_DT else []
-    stages += [Stage("choose_dt")] if spec.ADAPTIVE_DT or spec.VERLET else []
-    # (v* = v + dt a once dt is known; the warm start where the first residual finds compression, as
-    # SPlisHSPlasH's; then the solve)
-    stages += [Stage("dfsph_predict"), Stage("dfsph_residual", SOLVE_DENSITY),
-               Stage("dfsph_velocity", SOLVE_WARM_START)] + dfsph_solve(SOLVE_DENSITY, iterations) if spec.DFSPH else []
-    return stages + [Stage("integrate")]
-
-
-def dfsph_solve(solve, iterations):
-    """One DFSPH solve as recorded: the residual (whose last work group runs the convergence check), then
-    `iterations` times an update and the residual, dispatched indirectly. Once a check stops the solve, it
-    zeroes their group counts: the loop ends on the device, with no readback, and both backends run the
-    same updates."""
-    return [Stage("dfsph_residual", solve)] + [Stage(name, solve, True) for name in ("dfsph_velocity",
-                                                                                  "dfsph_residual")] * iterations
-
-
 def indirect_offset(stage):
     """The index in control of an indirect stage's (x, y, z) work group counts (dfsph.glsl)."""
     return dispatch_base(stage.level)
-
-
-def buffer_dtype(name, precision="float32"):
-    """The numpy dtype of buffer `name` at `precision` ("float32" or "float64")."""
-    if precision not in PRECISIONS:
-        raise ValueError(f"unknown precision {precision!r}: choose one of {', '.join(PRECISIONS)}")
-    dtype = BUFFERS[name][0]
-    return np.dtype(precision if dtype == REAL else dtype)
-
-
-def buffer_length(length, params, max_neighbours=0, gradients=False):
-    """Elements of a buffer of BUFFERS' `length` for the parameter block `params` (and the
-    spec.MAX_NEIGHBOURS list slots a particle; `gradients`: DFSPH stores their gradients, spec.GRADIENTS)."""
-    if length == "particles":
-        return int(params[0]["n"])
-    if length == "neighbours":
-        return max(1, int(params[0]["n"]) * list_width(max_neighbours))
-    if length == "gradients":
-        return max(1, int(params[0]["n"]) * list_width(max_neighbours)) if gradients else 1
-    if length == "cells":
-        return int(params[0]["cell_total"])
-    if length == "pyramid":
-        return pyramid_levels(int(params[0]["cell_total"]))[1]
-    return length
-
-
-def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gradients=False):
-    """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`,
-    neighbour lists of `max_neighbours` slots a particle (a scene's spec.MAX_NEIGHBOURS; with `gradients`,
-    spec.GRADIENTS, also room for DFSPH's gradient of each entry),
-    and the box `obstacles` ([{"min": [...], "max": [...]}], a scene's domain.obstacles) in obstacle_box.
-    A box's face that lies on a wall is no face: the box is continued through the wall by the tank's
-    size (a box on the floor reaches below it), so that no particle slides between the two on the
-    wall, and none inside the box is put back out through the wall (integrate.comp)."""
-    state = {}
-    for name, (_, c, length) in BUFFERS.items():
-        k = buffer_length(length, params, max_neighbours, gradients)
-        state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
-    state["particle_id"][:] = np.arange(len(state["particle_id"]))
-    state["grid_status"][:] = STATUS_CLEAR
-    state["control"][CONTROL_REBUILD] = 1  # (reused lists, spec.LIST_SKIN: the first step builds them)
-    if len(obstacles) > MAX_OBSTACLES:
-        raise ValueError(f"{len(obstacles)} obstacles: the obstacle_box buffer holds at most {MAX_OBSTACLES}")
-    wall_lo, wall_hi = params[0]["box_min"], params[0]["box_max"]
-    for k, box in enumerate(obstacles):
-        state["obstacle_box"][2 * k, :len(box["min"])] = box["min"]
-        state["obstacle_box"][2 * k + 1, :len(box["max"])] = box["max"]
-        lo, hi = state["obstacle_box"][2 * k, :3], state["obstacle_box"][2 * k + 1, :3]
-        lo[:] = np.where(lo <= wall_lo, wall_lo - (wall_hi - wall_lo), lo)
-        hi[:] = np.where(hi >= wall_hi, wall_hi + (wall_hi - wall_lo), hi)
-    return state
-
-
-def list_entries(state, spec, name="neighbours"):
-    """Buffer `name` of the neighbour lists (neighbours, or neighbour_gradients) of a state run with `spec`,
-    as (particles, spec.MAX_NEIGHBOURS[, 4]) in particle order of the buffers: either layout (list_slot)."""
-    n, slots = len(state["particle_id"]), spec.MAX_NEIGHBOURS
-    if spec.LIST_BY_PARTICLE:
-        words = np.asarray(state[name])[:n * slots]
-        return words.reshape(n, slots, *words.shape[1:])
-    if not spec.LIST_CHUNKS:
-        words = np.asarray(state[name])[:n * slots]
-        return words.reshape(slots, n, *words.shape[1:]).swapaxes(0, 1)
-    chunks = list_width(slots) // 4  # (chunk c of particle i: the 4 slots at words 4 (c n + i))
-    words = np.asarray(state[name])[:n * 4 * chunks]
-    lists = words.reshape(chunks, n, 4, *words.shape[1:]).swapaxes(0, 1)
-    return lists.reshape(n, 4 * chunks, *words.shape[1:])[:, :slots]
 
 
 def check_obstacles(state, spec):
@@ -313,22 +68,6 @@ def check_neighbours(state, spec):
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 
-# The per-particle buffers in_particle_order returns (the state a reader of a run sees).
-PARTICLE_BUFFERS = tuple(name for name, (_, c, length) in BUFFERS.items()
-                         if length == "particles" and name.startswith("particle_"))
-
-
-def in_particle_order(state, dim=None):
-    """Per-particle arrays ordered by particle id (undoing the grid's sort), vectors cut to `dim`."""
-    order = np.argsort(state["particle_id"], kind="stable")
-    out = {}
-    for name, (_, c, length) in BUFFERS.items():
-        if name in PARTICLE_BUFFERS:
-            values = state[name][order]
-            out[name] = values[:, :dim] if c == 4 and dim else values
-    return out
-
-
 def dispatch_size(stage, params):
     """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds (or one)."""
     kind = STAGES[stage.name][1]
@@ -345,12 +84,20 @@ def dispatch_size(stage, params):
 
 
 def stage_params(params, stage):
-    """The parameter block pushed for one dispatch of `stage` (its pyramid level filled in)."""
+    """The parameter record of one dispatch of `stage` for the numba mirrors: the block with the dispatch's
+    fields (params.glsl: Dispatch, the level) filled in."""
     if stage.level == 0:
         return params
     p = params.copy()
     p[0]["level"] = stage.level
     return p
+
+
+def stage_dispatch(stage):
+    """The push constants of one dispatch of `stage` on Vulkan (params.glsl: Dispatch)."""
+    dispatch = np.zeros(1, DISPATCH_DTYPE)
+    dispatch[0]["level"] = stage.level
+    return dispatch
 
 
 TRY_EVERY = 20  # numba: every TRY_EVERY-th call of compute_density runs the scan not chosen (Faster)
@@ -434,8 +181,8 @@ class NumbaBackend:
     def run_stage(self, stage):
         stage = stage if isinstance(stage, Stage) else Stage(stage)
         launch = STAGES[stage.name][0](self.spec, self.real)
-        launch(self._launch_groups(self._groups(stage), stage.when), self.local_size, stage_params(self.params, stage),
-               *(self.state[k] for k in STAGES[stage.name][2]))
+        launch(self._launch_groups(self._groups(stage), stage.when), self.local_size,
+               stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
     def step(self, count=1):
         if self.profile is not None:
@@ -497,7 +244,6 @@ class VulkanBackend:
                  steps_per_submit=64, precision="float32", before_allocating=None, profile=None):
         """`before_allocating(ctx)`: called once the device is chosen, before any buffer is made
         (sphcore.Simulation checks there that lavapipe's buffers fit in host memory)."""
-        from sphcore.vk_runner import Context
         self.dtypes = {name: buffer_dtype(name, precision) for name in BUFFERS}
         self.defines = ("SPHCORE_FLOAT64",) if precision == "float64" else ()
         self.ctx = Context(device=device, validation=validation, float64=precision == "float64")
@@ -505,7 +251,6 @@ class VulkanBackend:
             before_allocating(self.ctx)
         self.params, self.stages, self.steps_per_submit, self.precision = params, stages, steps_per_submit, precision
         if any(s.when != ALWAYS for s in stages) and not self.ctx.conditional_rendering:
-            from sphcore.vk_runner import VulkanError
             name = self.ctx.device_name
             self.ctx.close()
             raise VulkanError(f"{name} has no VK_EXT_conditional_rendering, which reused neighbour lists "
@@ -521,6 +266,8 @@ class VulkanBackend:
             self.shapes[name] = np.shape(state[name])
             self.buffers[name] = self.ctx.buffer(int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize, name)
             self.buffers[name].write(np.asarray(state[name], self.dtypes[name]))
+        self.params_buffer = self.ctx.buffer(UNIFORM_BYTES, "params", uniform=True)  # (params.glsl: Params)
+        self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
         self.local_size, self.spec_values = local_size, spec.values()
         self.pipelines = {}
         for name in sorted({s.name for s in stages}):
@@ -536,12 +283,11 @@ class VulkanBackend:
 
     def _pipeline(self, name):
         """The compute pipeline of shader `name`, built on first use with the scene's constants."""
-        from sphcore.vk_runner import compile_glsl
         if name not in self.pipelines:
             spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp", defines=self.defines)
-            pipeline = self.ctx.pipeline(spirv, len(BUFFERS), self.params.dtype.itemsize, self.local_size,
-                                         self.spec_values)
-            pipeline.bind([self.buffers[b] for b in BUFFERS])
+            pipeline = self.ctx.pipeline(spirv, len(BUFFERS), DISPATCH_DTYPE.itemsize, self.local_size,
+                                         self.spec_values, uniform_binding=PARAMS_BINDING)
+            pipeline.bind([self.buffers[b] for b in BUFFERS], uniform=self.params_buffer)
             self.pipelines[name] = pipeline
         return self.pipelines[name]
 
@@ -573,10 +319,10 @@ class VulkanBackend:
                     rec.begin_conditional(when(stage.when))
                     block = stage.when
                 if stage.indirect:
-                    rec.dispatch_indirect(self.pipelines[stage.name], stage_params(self.params, stage), control,
+                    rec.dispatch_indirect(self.pipelines[stage.name], stage_dispatch(stage), control,
                                           4 * indirect_offset(stage), predicate=running)
                 else:
-                    rec.dispatch(self.pipelines[stage.name], stage_params(self.params, stage),
+                    rec.dispatch(self.pipelines[stage.name], stage_dispatch(stage),
                                  dispatch_size(stage, self.params), predicate=running if block == ALWAYS else None)
                 # a barrier for the commands too where the next stage (of the step, or of the next step) reads
                 # control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
@@ -718,6 +464,7 @@ class VulkanBackend:
             p.free()
         for b in self.buffers.values():
             b.free()
+        self.params_buffer.free()
         self.ctx.close()
 
 

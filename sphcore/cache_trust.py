@@ -23,16 +23,10 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from sphcore.errors import BadEntry, CacheWarning
+
 MAGIC = b"sphcore cache 1\n"
 HEADER_SIZE = len(MAGIC) + 2 * 32  # MAGIC, SHA-256 of the key, SHA-256 of the payload
-
-
-class CacheWarning(UserWarning):
-    """A cache folder or entry was not used (untrusted, damaged or unwritable); the code was compiled."""
-
-
-class BadEntry(Exception):
-    """An entry that must not be used; its message says why."""
 
 
 _warned = set()

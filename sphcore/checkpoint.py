@@ -12,20 +12,23 @@ import zipfile
 
 import numpy as np
 
-from sphcore.backends import BACKENDS, BUFFERS, buffer_dtype, buffer_length
+from sphcore.backends import BACKENDS
+from sphcore.errors import CheckpointFieldError
+from sphcore.plan import BUFFERS, buffer_dtype, buffer_length
+from sphcore.solvers import SOLVERS
 
 MAX_STEP = 10**9  # time.steps' range
 MAX_TEXT = 2**20  # characters of the scene's JSON, the backend and device names
-RENAMED = {"buffer_dfsph_control": "buffer_control"}  # members of earlier versions, read under today's names
 MAX_EXTRA = 2**28  # bytes of a member beyond the buffers (a solver's log), loaded as it is
-
-
-class CheckpointFieldError(ValueError):
-    """A member of a checkpoint that does not fit the scene: `field` names it."""
-
-    def __init__(self, field, message):
-        self.field = field
-        super().__init__(f"field {field}: {message}")
+CHECKPOINT = "checkpoint.npz"  # its name in the run's folder
+# The buffers that carry the state from one step to the next (and the outputs of the last one): the generic
+# ones, then each solver's (whichever solver the scene runs, a checkpoint holds them all); every other buffer
+# is rewritten by each step before any stage reads it.
+CARRIED = tuple(dict.fromkeys((
+    "particle_x", "particle_v", "particle_a", "particle_rho", "particle_p", "particle_id", "grid_status",
+    "particle_vh", "time_state",  # Verlet's half-step velocity; dt, the last dt and the time (adaptive dt)
+    "control",  # DFSPH's step count, unconverged solves and iteration control; the reused lists' builds
+    *(name for solver in SOLVERS.values() for name in solver.carried))))
 
 
 def expected_members(scene, params, carried):
@@ -72,7 +75,7 @@ def read_checked(path, scene, params, carried, optional=("energy_start",)):
     members = expected_members(scene, params, carried)
     arrays = {}
     with zipfile.ZipFile(path) as archive:
-        stored = {RENAMED.get(name[:-4], name[:-4]): name for name in archive.namelist() if name.endswith(".npy")}
+        stored = {name[:-4]: name for name in archive.namelist() if name.endswith(".npy")}
         for field, (dtype, shape) in list(members.items()) + [(f, (np.dtype(np.float64), ())) for f in optional]:
             if field not in stored:
                 if field in optional:
@@ -83,6 +86,9 @@ def read_checked(path, scene, params, carried, optional=("energy_start",)):
                 if got_dtype.kind != "U" or got_shape != () or got_dtype.itemsize > dtype.itemsize:
                     raise CheckpointFieldError(field, f"is {got_dtype}{list(got_shape)}, expected a string of at "
                                                f"most {dtype.itemsize // 4} characters")
+            elif field == "params" and got_dtype == dtype and tuple(got_shape) != shape:
+                raise CheckpointFieldError(field, f"holds {got_shape[0] if got_shape else 0} bytes where this version's "
+                                           f"parameter block has {shape[0]}: a checkpoint of another version of sphcore")
             elif got_dtype != dtype or tuple(got_shape) != shape:
                 raise CheckpointFieldError(field, f"is {got_dtype}{list(got_shape)}, this scene needs "
                                            f"{dtype}{list(shape)}")
@@ -93,10 +99,10 @@ def read_checked(path, scene, params, carried, optional=("energy_start",)):
                 raise CheckpointFieldError(field, f"is {got_dtype}{list(got_shape)}: no checkpoint holds that")
         with np.load(path, allow_pickle=False) as data:
             for field in members:
-                arrays[field] = data[stored[field][:-4]]
+                arrays[field] = data[field]
             for field in list(optional) + extras:
                 if field in stored:
-                    arrays[field] = data[stored[field][:-4]]
+                    arrays[field] = data[field]
     check_values(arrays, scene, params, carried)
     return arrays
 

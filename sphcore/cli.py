@@ -8,8 +8,10 @@ import signal
 import sys
 from pathlib import Path
 
+from sphcore import __version__, folder
+from sphcore.errors import CheckpointError, SceneError, ShaderCompileError, SimulationError, VulkanError
 from sphcore.paths import SCENE_DIR  # noqa: F401 (tests and scripts import it from here)
-from sphcore.scene import scene_path  # noqa: F401 (tests and scripts import it from here)
+from sphcore.scene import SCHEMA, Scene, describe_schema, scene_path  # noqa: F401 (scene_path: tests import it)
 
 
 def printable(message):
@@ -34,9 +36,7 @@ def differences(given, stored, source, most=2):
 
 
 def cmd_run(args):
-    from sphcore import folder
-    from sphcore.scene import Scene
-    from sphcore.simulation import CheckpointError, load_checkpoint, run
+    from sphcore.runner import load_checkpoint, run  # (numba: only where a run starts)
 
     scene = Scene.load(args.scene) if args.scene else None
     checkpoint = None
@@ -75,8 +75,6 @@ def cmd_run(args):
 
 
 def cmd_keys(args):
-    from sphcore.scene import SCHEMA, SceneError, describe_schema
-
     schema, prefix = SCHEMA, ""
     if args.section:
         tables = sorted(name for name, key in SCHEMA.items() if isinstance(key, dict))
@@ -88,8 +86,7 @@ def cmd_keys(args):
 
 
 def cmd_plot(args):
-    from sphcore.plot import check_target, plot_state
-    from sphcore.scene import SceneError
+    from sphcore.plot import check_target, plot_state  # (matplotlib: only where a plot is drawn)
 
     final = Path(args.run_dir) / "final.npz"
     if args.out:  # the picture's path first: a missing folder is its fault, not final.npz's
@@ -106,9 +103,7 @@ def cmd_render(args):
         import pyvista  # noqa: F401
     except ImportError:
         sys.exit("sphcore: error: `sphcore render` needs pyvista: pip install -e '.[render]'")
-    from sphcore import folder
     from sphcore.render import render_run
-    from sphcore.scene import SceneError
 
     out = Path(args.out or Path(args.run_dir) / "render")
     if out.is_dir() and (out.resolve() == Path(args.run_dir).resolve() or (out / folder.MANIFEST).is_file()):
@@ -126,9 +121,6 @@ def cmd_render(args):
 
 
 def main(argv=None):
-    from sphcore import __version__
-    from sphcore.folder import MANIFEST, PATTERNS
-
     parser = argparse.ArgumentParser(prog="sphcore", description=__doc__)
     parser.add_argument("--version", action="version", version=f"sphcore {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -138,7 +130,7 @@ def main(argv=None):
                    help="continue the run in RUN_DIR from its checkpoint (its scene, backend and folder)")
     p.add_argument("--backend", choices=["numba", "vulkan"],
                    help="numba (default) or vulkan; with --resume: the checkpoint's")
-    p.add_argument("--steps", type=int, help="total steps, counted from the run's start (default: the scene's time.steps)")
+    p.add_argument("--steps", type=int, help="total steps, counted from the run's start (default: the scene's time.end, or its time.steps)")
     p.add_argument("--out", help="output folder (default: runs/<scene name>)")
     p.add_argument("--local-size", type=int, default=128, help="work-group size (specialization constant)")
     p.add_argument("--device", help="Vulkan device: index or part of its name (default: a discrete GPU, else any)")
@@ -146,8 +138,8 @@ def main(argv=None):
     p.add_argument("--profile", action="store_true",
                    help="time every stage of the step (Vulkan: GPU timestamps) and write RUN_DIR/profile.json")
     p.add_argument("--overwrite", action="store_true",
-                   help=f"replace the run already in --out: the files its manifest ({MANIFEST}) lists are deleted, "
-                        f"only under a run's names ({PATTERNS}); files it did not write are kept, and a file of "
+                   help=f"replace the run already in --out: the files its manifest ({folder.MANIFEST}) lists are deleted, "
+                        f"only under a run's names ({folder.PATTERNS}); files it did not write are kept, and a file of "
                         "those names that no manifest lists stops the run"),
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("keys", help="list every scene key with its default, unit and range")
@@ -186,10 +178,6 @@ def main(argv=None):
         parser.error(f"--level must be a finite number, got {args.level}")
     if getattr(args, "resume", None) and getattr(args, "overwrite", False):
         parser.error("--overwrite cannot be combined with --resume: a resume continues the run in RUN_DIR")
-
-    from sphcore.scene import SceneError
-    from sphcore.simulation import SimulationError
-    from sphcore.vk_runner import ShaderCompileError, VulkanError
 
     try:
         args.func(args)

@@ -36,7 +36,10 @@ import stat
 import sys
 from pathlib import Path
 
-from sphcore.scene import SceneError
+import numpy as np
+
+from sphcore.errors import FolderError
+from sphcore.output import atomic_file
 
 MANIFEST = "sphcore-run.json"
 SNAPSHOT = re.compile(r".+_\d{7}\.vtp$")
@@ -44,10 +47,6 @@ RUN_FILES = ("checkpoint.npz", "final.npz", "final.png", "scene.json", "profile.
 TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 # What `--overwrite` deletes (with the manifest's say-so), for `sphcore run --help`
 PATTERNS = "checkpoint.npz, final.npz, final.png, profile.json, scene.json, NAME.pvd, NAME_NNNNNNN.vtp"
-
-
-class FolderError(SceneError):
-    """An output folder that a run cannot use as it is; the message names the folder and what to do."""
 
 
 def is_run_name(name):
@@ -194,8 +193,6 @@ class RunFolder:
             return False
 
     def _save(self):
-        from sphcore.output import atomic_file
-
         text = json.dumps({"written_by": "sphcore", "files": sorted(self.names)}, indent=1) + "\n"
         with atomic_file(MANIFEST, dir_fd=self.fd, before_rename=self.check) as f:
             f.write(text.encode())
@@ -215,8 +212,6 @@ class RunFolder:
     @contextlib.contextmanager
     def open(self, name):
         """A binary file that atomically becomes out_dir/`name` (sphcore.output.atomic_file), in this folder."""
-        from sphcore.output import atomic_file
-
         stale, self.stale = self.stale, ()
         for old in stale:
             self.remove(old)
@@ -230,8 +225,6 @@ class RunFolder:
 
     def savez(self, name, **arrays):
         """np.savez into out_dir/`name`, atomically (see sphcore.output.atomic_savez)."""
-        import numpy as np
-
         with self.open(name) as f:
             np.savez(f, **arrays)
 

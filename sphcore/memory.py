@@ -1,7 +1,7 @@
 """How much host memory a run needs at its peak, estimated before anything is allocated, and how
 much this process may still use.
 
-The estimate follows what a run holds at once (sphcore.simulation.run), from the buffers of
+The estimate follows what a run holds at once (sphcore.runner.run), from the buffers of
 sphcore.backends.BUFFERS at the scene's precision:
 
 - start: the state Simulation builds (`empty_state`) and the backend's copy of it (numba; Vulkan
@@ -22,10 +22,9 @@ import os
 import resource
 from pathlib import Path
 
-import numpy as np
-
-from sphcore.backends import BUFFERS, buffer_dtype, buffer_length
-from sphcore.scene import SceneError
+from sphcore.checkpoint import CARRIED
+from sphcore.errors import MemoryLimitError
+from sphcore.plan import BUFFERS, buffer_dtype, buffer_length
 
 MiB = 2**20
 GiB = 2**30
@@ -34,13 +33,9 @@ COMPILE = 320 * MiB  # numba compiling the mirrors (LLVM), or the Vulkan driver 
 ADDRESS_SPACE = 1 * GiB  # address space reserved beyond resident memory (thread stacks, malloc arenas, LLVM)
 
 
-class MemoryLimitError(SceneError):
-    """A run that would not fit in the memory available; the message gives both figures and what would fit."""
-
-
 def particle_count(scene):
     """The particles `scene` starts with, counted without making them."""
-    return int(sum(np.prod(scene._lattice_shape(b)) for b in scene["fluid.blocks"]))
+    return scene.particle_count()
 
 
 def buffer_bytes(params, precision, max_neighbours=0, gradients=False):
@@ -54,8 +49,6 @@ def estimate(scene, backend="numba", device_in_host=None, n=None):
     """(peak bytes, {term: bytes}) of a run of `scene` on `backend` at its precision. Vulkan's
     device buffers count where `device_in_host` (default: not counted, as on a GPU). `n`
     overrides the particle count (for what-would-fit figures)."""
-    from sphcore.simulation import CARRIED
-
     n = particle_count(scene) if n is None else n
     precision = scene["physics.precision"]
     spec = scene.spec_for(backend)

@@ -1,9 +1,10 @@
 """The parameter block: parsed from shaders/sph/params.glsl, filled from a scene.
 
-The GLSL push-constant block is the single definition. `PARAMS_DTYPE` is a numpy record
-dtype with the same field names and std430 offsets, so one `np.ndarray` of one record is
-both the bytes pushed to Vulkan and the `params` argument of every numba mirror
-(`P = params[0]; P.h`).
+The GLSL blocks are the single definition: `Params`, a uniform buffer written once (binding
+PARAMS_BINDING), and `Dispatch`, the push constants of what changes from one dispatch to the next.
+`PARAMS_DTYPE` is a numpy record dtype with Params' field names and offsets followed by Dispatch's, so
+one `np.ndarray` of one record is the `params` argument of every numba mirror (`P = params[0]; P.h`;
+`D = params[0]; D.level`) and, its first UNIFORM_BYTES, the bytes of Vulkan's uniform buffer.
 """
 import math
 import re
@@ -25,9 +26,10 @@ _GLSL_TYPES = {
 }
 
 
-def dtype_from_glsl_block(text):
-    """Record dtype of the first `uniform Name { type field; ... }` block in GLSL `text`."""
-    body = re.search(r"uniform\s+\w+\s*\{(.*?)\}", text, re.S)
+def dtype_from_glsl_block(text, name=r"\w+"):
+    """Record dtype of the first `uniform Name { type field; ... }` block in GLSL `text` (of the block
+    called `name`, if given). The offsets are std430's, which are std140's for scalars and vectors."""
+    body = re.search(rf"uniform\s+{name}\s*\{{(.*?)\}}", text, re.S)
     if body is None:
         raise ValueError("no uniform block found")
     names, formats, offsets, offset = [], [], [], 0
@@ -46,7 +48,21 @@ def dtype_from_glsl_block(text):
     return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize})
 
 
-PARAMS_DTYPE = dtype_from_glsl_block((SHADER_DIR / "sph" / "params.glsl").read_text())
+def _joined(first, second):
+    """A record dtype of `first`'s fields, then `second`'s from `first.itemsize` on."""
+    fields = {**{k: v[:2] for k, v in first.fields.items()},
+              **{k: (v[0], first.itemsize + v[1]) for k, v in second.fields.items()}}
+    return np.dtype({"names": list(fields), "formats": [f for f, _ in fields.values()],
+                     "offsets": [o for _, o in fields.values()], "itemsize": first.itemsize + second.itemsize})
+
+
+_PARAMS_GLSL = (SHADER_DIR / "sph" / "params.glsl").read_text()
+PARAMS_BINDING = int(re.search(r"binding\s*=\s*(\d+)\)\s*uniform\s+Params", _PARAMS_GLSL).group(1))
+UNIFORM_DTYPE = dtype_from_glsl_block(_PARAMS_GLSL, "Params")  # Vulkan's uniform buffer
+DISPATCH_DTYPE = dtype_from_glsl_block(_PARAMS_GLSL, "Dispatch")  # and push constants
+UNIFORM_BYTES = UNIFORM_DTYPE.itemsize
+# the numba mirrors' record: both blocks' fields (`P = params[0]; P.h`, `D = params[0]; D.level`)
+PARAMS_DTYPE = _joined(UNIFORM_DTYPE, DISPATCH_DTYPE)
 MC_PARAMS_DTYPE = dtype_from_glsl_block((SHADER_DIR / "mc" / "params.glsl").read_text())
 
 
@@ -124,7 +140,7 @@ def pyramid_levels(cell_total):
 def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
                     gravity, box_min, box_max, grid_dim=(1, 1, 1), kernel="mueller", density_diffusion="none",
                     diffusion_delta=0.1, gravity_on=True, viscosity_model="laminar", alpha=0.0, cfl_number=0.0,
-                    reach=None, cell_split=1):
+                    reach=None, cell_split=1, spacing=0.0, shifting=0.0):
     """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
     `dim` components are padded with zeros to three. `kernel`: physics.kernel; `density_diffusion`
     ("none" | "molteni" | "fourtakas") with coefficient `diffusion_delta` (fluid.density_diffusion);
@@ -132,7 +148,8 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     `viscosity_model` ("laminar" | "artificial"; physics.viscosity_model): laminar takes `viscosity`
     (mu), artificial `alpha` (fluid.alpha; viscosity_coef = alpha c h, c = sqrt(stiffness));
     `cfl_number`: 0.25 time.dt_fraction where time.dt = "adaptive" (then `dt` is the largest step).
-    The grid's cells are `cell_split` to the search's `reach` (h, or a reused list's; CELL_SPLIT)."""
+    The grid's cells are `cell_split` to the search's `reach` (h, or a reused list's; CELL_SPLIT).
+    `shifting`: A of physics.shifting = "lind" (fluid.shifting; 0: none), at the lattice's `spacing` dx."""
     c = kernel_coefficients(h, dim, kernel)
     pad = lambda v: list(v) + [0.0] * (3 - len(v))  # noqa: E731
     params = np.zeros(1, PARAMS_DTYPE)
@@ -168,6 +185,11 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     if density_diffusion == "fourtakas" and gravity_on:
         p["hydrostatic"] = [rest_density * g / stiffness for g in pad(gravity)]
     p["cfl_number"] = cfl_number
+    # particle shifting (Lind et al. 2012, shaders/sph/shifting.glsl): D = A h_s |v_i| dt, h_s = h / 2, and
+    # 1 / kernel_w(dx^2), the shape of W at the spacing (kernels.glsl) for Lind's (W_ij / W(dx))^4
+    p["shifting_coef"] = shifting * h / 2
+    p["shifting_w"] = 1.0 / ((h * h - spacing * spacing) ** 3 if kernel == "mueller" else
+                             (1 - spacing / h) ** 4 * (1 + 4 * spacing / h)) if shifting else 0.0
     return params
 
 

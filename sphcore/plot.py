@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sphcore.scene import SceneError
+from sphcore import folder
+from sphcore.errors import SceneError
+from sphcore.output import atomic_write_bytes
 
 SOFTWARE = "sphcore plot"  # the PNG's Software text: how plot knows a picture of its own
 
@@ -109,9 +111,6 @@ def plot_state(npz_path, out=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from sphcore import folder
-    from sphcore.output import atomic_write_bytes
 
     data = read_final(npz_path)
     later = stale(npz_path, data["step"])

@@ -15,6 +15,9 @@ import json
 
 import numpy as np
 
+from sphcore.output import atomic_write_bytes
+from sphcore.plan import BUFFERS, STAGES, buffer_dtype, buffer_length, plan
+
 H200_BANDWIDTH = 4.8e12  # bytes/s, HBM3e
 H200_FP32 = 67e12  # flop/s, float32 without tensor cores
 FLOPS_PER_PAIR = 30  # a distance, a compare and (for a neighbour) the kernel and its sums: about 30 flops
@@ -104,8 +107,6 @@ def pair_tests(scene, position):
 
 def work(scene, position):
     """({stage: bytes of its buffers}, pair tests per pair loop) of one step of `scene` at `position`."""
-    from sphcore.backends import BUFFERS, STAGES, buffer_dtype, buffer_length, plan
-
     params = scene.params(len(position))
     slots, precision = scene.spec.MAX_NEIGHBOURS, scene["physics.precision"]
     sizes = {name: buffer_length(length, params, slots) * c * buffer_dtype(name, precision).itemsize
@@ -116,8 +117,6 @@ def work(scene, position):
 def report(profile, scene, position, out_dir=None):
     """The profile of a run of `scene` as a table (returned) and, with `out_dir`, out_dir/profile.json;
     the pair tests are counted on `position` (the run's last state)."""
-    from sphcore.output import atomic_write_bytes
-
     per_stage, pairs = work(scene, position)
     if out_dir is not None:
         atomic_write_bytes(f"{out_dir}/profile.json", profile.to_json(per_stage, pairs).encode())

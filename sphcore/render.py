@@ -18,9 +18,15 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from sphcore import output
+from sphcore.errors import SceneError
+from sphcore.folder import listed, names_of_run
 from sphcore.output import snapshot_step
+from sphcore.plot import read_final
+from sphcore.scene import Scene
+from sphcore.surface import particle_surface
 
 if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -136,9 +142,6 @@ def render_mesh(verts, faces, normals, png_path, particles=None, box=None, camer
 def read_scene(run_dir):
     """The scene of a run folder, from its scene.json or else its final.npz, or SceneError naming
     the file and what is wrong with it (missing, truncated, not sphcore's)."""
-    from sphcore.plot import read_final
-    from sphcore.scene import Scene, SceneError
-
     run_dir = Path(run_dir)
     if (run_dir / "scene.json").is_file():
         source = run_dir / "scene.json"
@@ -160,8 +163,6 @@ def read_scene(run_dir):
 def read_pvd(pvd):
     """[(file name, time)] of a .pvd's data sets, or SceneError naming the file (truncated, not XML,
     a time that is no number)."""
-    from sphcore.scene import SceneError
-
     try:
         return output.read_pvd(pvd)
     except (OSError, ET.ParseError, ValueError) as e:
@@ -171,8 +172,6 @@ def read_pvd(pvd):
 def load_run(run_dir):
     """(scene, snapshot paths in step order, file name -> time) of a run folder, or SceneError saying
     what is missing or unreadable. Snapshots its .pvd lists that are gone are left out, with a note."""
-    from sphcore.scene import SceneError
-
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise SceneError(f"{run_dir}: no such run folder (`sphcore run SCENE --out {run_dir}` writes one)")
@@ -204,8 +203,6 @@ def read_positions(path):
     from pyvista.core.utilities import VtkErrorCatcher
     from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
-    from sphcore.scene import SceneError
-
     try:  # the whole XML first: VTK reads a truncated file as an empty one with only a log message
         piece = ET.parse(path).getroot().find("PolyData/Piece")
         n = int(piece.get("NumberOfPoints"))
@@ -229,8 +226,6 @@ def read_positions(path):
 def check_complete(path):
     """SceneError naming a snapshot that does not end in </VTKFile> (a truncated file): checked for
     every snapshot before the first frame is drawn, the whole file only when it is read."""
-    from sphcore.scene import SceneError
-
     try:
         with open(path, "rb") as f:
             f.seek(max(f.seek(0, os.SEEK_END) - 64, 0))
@@ -249,9 +244,6 @@ def surface_name(scene_name, snapshot):
 def refuse_clash(out_dir, names):
     """SceneError (one line) if a file `names` would give in out_dir is, or will be, a run's: one that
     out_dir's run manifest lists, or a name a run of the scene in out_dir/scene.json writes."""
-    from sphcore.folder import listed, names_of_run
-    from sphcore.scene import SceneError
-
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         return
@@ -282,10 +274,6 @@ def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, parti
     after each frame. `spacing` (default h / 2) and `level` go to particle_surface. An out_dir
     holding a run whose files these names would replace is refused before anything is written.
     Returns the paths written, in order."""
-    from tqdm import tqdm
-
-    from sphcore.surface import particle_surface
-
     if mesh_format not in ("vtp", "ply"):
         raise ValueError(f"mesh_format must be vtp or ply, got {mesh_format!r}")
     if every < 1:

@@ -5,6 +5,7 @@ out-of-range values are rejected with a `SceneError` naming the file and the key
 keys` prints the table below.
 """
 import copy
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -17,6 +18,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from sphcore.errors import SceneError  # noqa: F401 (sphcore.scene.SceneError)
 from sphcore.params import CELL_PADDING, KERNELS, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
 from sphcore.paths import SCENE_DIR
 
@@ -79,14 +81,7 @@ LIST_WORDS = {"numba": 1 << 28, "vulkan": (1 << 30) - 1}
 # step); on the H200 reading them was slower than computing them (1 M particles: 4.17 -> 4.37 ms)
 GRADIENT_SLOTS = {"numba": 1 << 26}
 
-class SceneError(ValueError):
-    """A scene that cannot be run; the message names the file and the key.
-
-    >>> import sphcore
-    >>> sphcore.Scene.from_dict({"fluid": {"spacing": -1.0}})
-    Traceback (most recent call last):
-    sphcore.scene.SceneError: fluid.spacing = -1.0: must be within [1e-05, 1] m
-    """
+DEFAULT_MODEL = "engineering"  # physics.model of a scene that names none
 
 
 @dataclass(frozen=True)
@@ -99,9 +94,41 @@ class Key:
     kind: str = "float"  # float | int | vec | str | bool | blocks | boxes (blocks, or none) | dt (a float or "auto") | one of "a|b|c"
 
 
+# physics.model -> the keys it sets, where the scene does not give them (SCHEMA's defaults are DEFAULT_MODEL's).
+# Every model sets the same keys, so that a scene names its model whole.
+PRESETS = {
+    # Mueller et al. 2003 (the seeds' model)
+    "graphics": {"physics.pressure_solver": "state_equation", "physics.kernel": "mueller",
+                 "fluid.smoothing_ratio": 2.0, "physics.density": "summation", "physics.density_diffusion": "none",
+                 "fluid.density_diffusion": 0.1, "physics.viscosity_model": "laminar", "fluid.alpha": 0.02,
+                 "fluid.relaxation": 1.0, "time.integrator": "symplectic_euler", "time.dt": 1e-4},
+    # weakly compressible SPH as TrixiParticles' examples/fluid/dam_break_2d.jl: Wendland 1995's C2 with smoothing
+    # length 2 dx (support radius 4 dx), Molteni & Colagrossi 2009, Monaghan 1992 (alpha 0.02 on the smoothing
+    # length), velocity Verlet; sphcore validate's "engineering" configuration (docs/models/index.md)
+    "engineering": {"physics.pressure_solver": "state_equation", "physics.kernel": "wendland_c2",
+                    "fluid.smoothing_ratio": 4.0, "physics.density": "continuity", "physics.density_diffusion": "molteni",
+                    "fluid.density_diffusion": 0.1, "physics.viscosity_model": "artificial", "fluid.alpha": 0.01,
+                    "fluid.relaxation": 1.0, "time.integrator": "verlet", "time.dt": "adaptive"},
+    # Bender & Koschier 2015, 2017 with the kernel and relaxation with which a tank comes to rest
+    # (docs/models/dfsph.md; sphcore validate's "dfsph_wendland"); dt "auto": the largest step from the viscous
+    # bound and the CFL step at the free-fall speed, not time.dt's fixed 1e-4 s
+    "dfsph": {"physics.pressure_solver": "dfsph", "physics.kernel": "wendland_c2", "fluid.smoothing_ratio": 2.0,
+              "physics.density": "summation", "physics.density_diffusion": "none", "fluid.density_diffusion": 0.1,
+              "physics.viscosity_model": "laminar", "fluid.alpha": 0.02, "fluid.relaxation": 0.8,
+              "time.integrator": "symplectic_euler", "time.dt": "auto"},
+}
+
 SCHEMA = {
     "name": Key("scene", "", 0, 0, "name used for output files", "str"),
     "physics": {
+        "model": Key(DEFAULT_MODEL, "", 0, 0, "the model: the values of the keys it sets (each lists them) where the "
+                     "scene does not give them. graphics: Mueller et al. 2003's kernels on 2 dx, summation density, "
+                     "laminar viscosity, symplectic Euler, dt 1e-4 s (fast; blows up in dam breaks); engineering: "
+                     "Wendland 1995's C2 on 4 dx, continuity density with Molteni & Colagrossi 2009's diffusion, "
+                     "Monaghan 1992's artificial viscosity, Verlet, adaptive dt (TrixiParticles' dam_break_2d.jl); "
+                     "dfsph: DFSPH (Bender & Koschier 2015, 2017), Wendland C2 on 2 dx, summation density, laminar "
+                     'viscosity, symplectic Euler, omega 0.8, dt from time.cfl_number up to the "auto" step',
+                     "graphics|engineering|dfsph"),
         "dimension": Key(2, "-", 2, 3, "2 or 3; every vector in the scene has this many components", "int"),
         "neighbour_search": Key("grid", "", 0, 0, "grid (cells of size h, HistoPyramid counting sort) or "
                                 "all_pairs (O(n^2), no grid)", "grid|all_pairs"),
@@ -114,16 +141,16 @@ SCHEMA = {
         "gravity": Key(True, "", 0, 0, "the gravity term (vector forces.gravity)", "bool"),
         "precision": Key("float32", "", 0, 0, "float32, or float64 particle buffers and arithmetic (the "
                          "Vulkan device must support shaderFloat64)", "float32|float64"),
-        "kernel": Key("mueller", "", 0, 0, "mueller: poly6 values, spiky gradients, viscosity Laplacian (Mueller et "
+        "kernel": Key("wendland_c2", "", 0, 0, "mueller: poly6 values, spiky gradients, viscosity Laplacian (Mueller et "
                       "al. 2003); wendland_c2: Wendland C2 for values and gradients, Morris et al. 1997's "
                       "Laplacian; support radius h for both", "mueller|wendland_c2"),
-        "density": Key("summation", "", 0, 0, "summation: rho_i = sum_j m W_ij each step, pressure clamped at 0; "
+        "density": Key("continuity", "", 0, 0, "summation: rho_i = sum_j m W_ij each step, pressure clamped at 0; "
                        "continuity: d rho/dt = sum_j m (v_i - v_j) . grad W_ij integrated, starting hydrostatic, "
                        "negative pressures kept", "summation|continuity"),
-        "density_diffusion": Key("none", "", 0, 0, "delta-SPH term of the continuity density (coefficient "
+        "density_diffusion": Key("molteni", "", 0, 0, "delta-SPH term of the continuity density (coefficient "
                                  "fluid.density_diffusion): molteni (Molteni & Colagrossi 2009) or fourtakas "
                                  "(Fourtakas et al. 2019: its hydrostatic part removed)", "none|molteni|fourtakas"),
-        "viscosity_model": Key("laminar", "", 0, 0, "laminar: mu sum_j m (v_j - v_i) L_ij / (rho_i rho_j) (Mueller et al. "
+        "viscosity_model": Key("artificial", "", 0, 0, "laminar: mu sum_j m (v_j - v_i) L_ij / (rho_i rho_j) (Mueller et al. "
                                "2003), coefficient fluid.viscosity; artificial: Monaghan 1992's Pi_ij = -alpha c h "
                                "(v_ij . r_ij) / (rho_ij (r^2 + 0.01 h^2)) for approaching pairs, coefficient fluid.alpha",
                                "laminar|artificial"),
@@ -135,6 +162,10 @@ SCHEMA = {
         "list_skin": Key(0.0, "h", 0.0, 1.0, "the state equation's neighbour lists reused between builds: a build "
                          "sorts the particles and lists every pair within (1 + list_skin) h, and the lists serve until a "
                          "particle has moved list_skin h / 2.05 (rounded to 0.001 h); 0: a sort and a list every step"),
+        "shifting": Key("none", "", 0, 0, "particle shifting: lind moves each particle down its concentration "
+                        "gradient, dr_i = -D grad C_i, D = A h_s |v_i| dt (Lind et al. 2012, Skillen et al. 2013; "
+                        "coefficient A = fluid.shifting), not at the free surface (DualSPHysics' threshold); state "
+                        "equation only", "none|lind"),
     },
     "domain": {
         "box_min": Key([0.0, 0.0], "m", -1e3, 1e3, "lower corner of the walls (open: origin of the hashed grid)", "vec"),
@@ -153,14 +184,16 @@ SCHEMA = {
                       "boxes filled with particles on a square (cubic) lattice: [{min = [...], max = [...]}]",
                       "blocks"),
         "spacing": Key(0.01, "m", 1e-5, 1.0, "particle spacing dx of the initial lattice"),
-        "smoothing_ratio": Key(2.0, "-", 1.5, 6.0, "support radius h / spacing"),
+        "smoothing_ratio": Key(4.0, "-", 1.5, 6.0, "support radius h / spacing"),
         "rest_density": Key(1000.0, "kg/m^3", 1.0, 1e5, "rest density rho_0"),
         "stiffness": Key(400.0, "m^2/s^2", 1.0, 1e8,
                          "k = c^2 for a speed of sound c (about 10x the fastest flow); linear and Tait alike"),
         "viscosity": Key(1.0, "Pa s", 0.0, 1e5, "dynamic viscosity mu of Mueller's viscosity term"),
         "cohesion": Key(0.0, "m^dim/s^2", 0.0, 1e6, "kappa of the cohesion force -kappa sum_j W(r_ij) (x_i - x_j)"),
-        "alpha": Key(0.02, "-", 0.0, 10.0, 'alpha of physics.viscosity_model = "artificial" (Monaghan 1992), with '
+        "alpha": Key(0.01, "-", 0.0, 10.0, 'alpha of physics.viscosity_model = "artificial" (Monaghan 1992), with '
                      "c = sqrt(stiffness); its shear viscosity is mu = alpha rho_0 c h / (2 dim + 4)"),
+        "shifting": Key(2.0, "-", 0.0, 10.0, 'A of physics.shifting = "lind": D = A h_s |v_i| dt, h_s = h / 2 '
+                        "(DualSPHysics' ShiftCoef, -2 there with the sign)"),
         "density_diffusion": Key(0.1, "-", 0.0, 1.0, "delta of physics.density_diffusion: D_i = delta h_s c_0 "
                                  "sum_j psi_ij . grad W_ij V_j, h_s = h / 2, c_0 = sqrt(stiffness)"),
         "max_density_error": Key(0.001, "-", 1e-6, 0.1, 'physics.pressure_solver = "dfsph": the constant-density solve '
@@ -184,17 +217,22 @@ SCHEMA = {
         "restitution": Key(0.3, "-", 0.0, 1.0, "fraction of the normal speed kept when a particle hits a wall"),
     },
     "time": {
-        "dt": Key(1e-4, "s", 1e-8, 1.0, 'time step, or "auto": dt_fraction times the stability bound '
+        "dt": Key("adaptive", "s", 1e-8, 1.0, 'time step, or "auto": dt_fraction times the stability bound '
                   '(CFL, viscous, body force; see stable_dt), or "adaptive": that bound computed on the device '
                   "every step from the fastest particle and the largest acceleration", "dt"),
         "dt_fraction": Key(1.0, "-", 0.01, 10.0, 'fraction of the stability bound taken by dt = "auto" or "adaptive"'),
-        "integrator": Key("symplectic_euler", "", 0, 0, "symplectic_euler: v += dt a, x += dt v (first order); verlet: "
+        "integrator": Key("verlet", "", 0, 0, "symplectic_euler: v += dt a, x += dt v (first order); verlet: "
                           "kick-drift-kick leapfrog, one force evaluation per step (second order)",
                           "symplectic_euler|verlet"),
         "cfl_number": Key(0.4, "-", 0.01, 1.0, 'physics.pressure_solver = "dfsph": dt = min(the largest step, cfl_number '
                           "fluid.spacing / |v|max) on the device each step (no sound speed)"),
-        "steps": Key(5000, "steps", 1, 1e9, "steps to run unless --steps is given", "int"),
-        "output_every": Key(250, "steps", 1, 1e9, "steps between snapshots", "int"),
+        "end": Key(0.0, "s", 0.0, 1e9, "simulated time at which the run ends, in place of time.steps (0: not given; "
+                   "time.steps counts the run)"),
+        "output_interval": Key(0.0, "s", 0.0, 1e9, "simulated time between snapshots, in place of time.output_every "
+                               "(0: not given; time.output_every counts them)"),
+        "steps": Key(5000, "steps", 0, 1e9, "steps to run unless --steps is given (0 where time.end ends the run)", "int"),
+        "output_every": Key(250, "steps", 0, 1e9, "steps between snapshots (0 where time.output_interval sets them)",
+                            "int"),
         "checkpoint_every": Key(1000, "steps", 1, 1e9, "steps between checkpoints (what `sphcore run --resume` "
                                 "continues from)", "int"),
     },
@@ -268,7 +306,7 @@ def _check(where, key, value):
     return value
 
 
-def _merge(where, schema, given):
+def _merge(where, schema, given, preset):
     if not isinstance(given, dict):
         raise SceneError(f"{where or 'scene'}: expected a table, got {_shown(given)}")
     unknown = sorted(set(given) - set(schema), key=str)
@@ -278,10 +316,25 @@ def _merge(where, schema, given):
     for name, key in schema.items():
         path = f"{where}.{name}" if where else name
         if isinstance(key, dict):
-            out[name] = _merge(path, key, given.get(name, {}))
+            out[name] = _merge(path, key, given.get(name, {}), preset)
         else:
-            out[name] = _check(path, key, given[name]) if name in given else key.default
+            out[name] = _check(path, key, given[name]) if name in given else preset.get(path, key.default)
     return out
+
+
+def _resolve_time(config, given):
+    """time.end against time.steps and time.output_interval against time.output_every: at most one of each
+    pair given (0 is "not given"); where the time in seconds is given, the step count is 0 in `config`."""
+    time = config["time"]
+    for seconds, steps, what in (("end", "steps", "the run's length"), ("output_interval", "output_every",
+                                                                         "the snapshots' spacing")):
+        if time[seconds] > 0 and given.get(steps, 0) > 0:
+            raise SceneError(f"time.{seconds} = {time[seconds]:g} s and time.{steps} = {given[steps]} both set "
+                             f"{what}: give one of them")
+        if time[seconds] > 0:
+            time[steps] = 0
+        elif time[steps] == 0:
+            raise SceneError(f"time.{steps} = 0: give time.{steps} > 0 or time.{seconds} > 0 s")
 
 
 @dataclass
@@ -292,8 +345,10 @@ class Scene:
 
     >>> import sphcore
     >>> scene = sphcore.Scene.from_dict({"fluid": {"spacing": 0.02}})
-    >>> scene["fluid.spacing"], scene["physics.kernel"]  # given, and a default
-    (0.02, 'mueller')
+    >>> scene["fluid.spacing"], scene["physics.kernel"]  # given, and the default model's (engineering)
+    (0.02, 'wendland_c2')
+    >>> sphcore.Scene.from_dict({"physics": {"model": "graphics"}})["physics.kernel"]  # physics.model's
+    'mueller'
     >>> scene.dim, len(scene.initial_positions())  # the default block, 0.3 m square, at 2 cm
     (2, 225)
     >>> sphcore.Scene.load("dam_break_2d")["fluid.spacing"]  # a shipped scene
@@ -301,16 +356,23 @@ class Scene:
     """
     config: dict
     source: str = "<defaults>"
+    from_model: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)  # keys physics.model set -> which
 
     @classmethod
     def from_dict(cls, data, source="<dict>"):
         """The scene of `data` (nested dicts, as a TOML file parses), checked: SceneError names a bad key."""
-        config = _merge("", SCHEMA, data)
+        physics = data.get("physics") if isinstance(data, dict) else None
+        named = isinstance(physics, dict) and "model" in physics
+        model = _check("physics.model", SCHEMA["physics"]["model"], physics["model"]) if named else DEFAULT_MODEL
+        config = _merge("", SCHEMA, data, PRESETS[model])
         if config["physics"]["dimension"] == 3:  # vectors left at their 2D defaults gain a z component
             for table, name, z in (("domain", "box_min", 0.0), ("domain", "box_max", 1.0), ("forces", "gravity", 0.0)):
                 if name not in data.get(table, {}):
                     config[table][name] = config[table][name] + [z]
-        scene = cls(config, source)
+        _resolve_time(config, data.get("time", {}))
+        by = f'physics.model = "{model}"' + ("" if named else ", the default")
+        given = {f"{table}.{key}" for table, keys in data.items() if isinstance(keys, dict) for key in keys}
+        scene = cls(config, source, {k: by for k in PRESETS[model] if k not in given})
         scene._check_models()
         scene._check_geometry()
         return scene
@@ -372,6 +434,17 @@ class Scene:
         return self["time.dt"]
 
     @property
+    def end_time(self):
+        """Simulated time [s] at which the run ends (time.end), or None where time.steps counts the run."""
+        return self["time.end"] if self["time.end"] > 0 else None
+
+    @property
+    def output_interval(self):
+        """Simulated time [s] between snapshots (time.output_interval), or None where time.output_every
+        counts them in steps."""
+        return self["time.output_interval"] if self["time.output_interval"] > 0 else None
+
+    @property
     def shear_viscosity(self):
         """mu [Pa s]: fluid.viscosity, or for the artificial viscosity its shear viscosity alpha rho_0 c h
         / (2 dim + 4) (Monaghan 2005, sec. 4.6)."""
@@ -428,26 +501,52 @@ class Scene:
         return self["fluid.spacing"] * self["fluid.smoothing_ratio"]
 
     def _check_models(self):
-        """Combinations of physics.* that have no meaning."""
-        if self["physics.pressure_solver"] == "dfsph":
-            for key, value, why in (("physics.density", "continuity", "DFSPH's densities are summed each step"),
-                                    ("time.integrator", "verlet", "the solve corrects the symplectic Euler step's "
-                                     "velocity")):
-                if self[key] == value:
-                    raise SceneError(f'physics.pressure_solver = "dfsph" does not go with {key} = "{value}" ({why})')
+        """Combinations of physics.* that have no meaning: one SceneError naming the keys on both sides, and
+        the model that set any of them."""
+        if self.dfsph:
+            conflicts = [(key, why) for key, value, why in (
+                ("physics.density", "continuity", "DFSPH's densities are summed each step"),
+                ("time.integrator", "verlet", "the solve corrects the symplectic Euler step's velocity"))
+                if self[key] == value]
+            if conflicts:
+                self._refuse("physics.pressure_solver", [k for k, _ in conflicts], "; ".join(w for _, w in conflicts))
         if self["physics.list_skin"] > 0:
             for key, value, why in (("physics.pressure_solver", "dfsph", "its solves walk lists built every step"),
                                     ("physics.neighbour_search", "all_pairs", "the lists are built from the grid")):
                 if self[key] == value:
-                    raise SceneError(f'physics.list_skin = {self["physics.list_skin"]:g} does not go with {key} = '
-                                     f'"{value}" ({why}); set physics.list_skin = 0')
+                    self._refuse("physics.list_skin", [key], why, "set physics.list_skin = 0")
             if self["domain.obstacles"]:
                 raise SceneError(f'physics.list_skin = {self["physics.list_skin"]:g} does not go with domain.obstacles '
                                  "(an obstacle's images are chosen at every step); set physics.list_skin = 0")
+        if self["physics.shifting"] != "none" and self.dfsph:
+            self._refuse("physics.shifting", ["physics.pressure_solver"], "the shift's buffer holds DFSPH's predicted "
+                         'velocity in its constant-density solve; use physics.pressure_solver = "state_equation"')
         if self["physics.density_diffusion"] != "none" and self["physics.density"] != "continuity":
-            raise SceneError(f"physics.density_diffusion = {self['physics.density_diffusion']!r} needs "
-                             f'physics.density = "continuity" (got {self["physics.density"]!r}): a summation '
-                             "density is recomputed from the positions every step, there is nothing to diffuse")
+            self._refuse("physics.density_diffusion", ["physics.density"], 'it needs physics.density = "continuity": a '
+                         "summation density is recomputed from the positions every step, there is nothing to diffuse")
+
+    def _named(self, keys):
+        """'key = value and ...' for a message, followed by the model that set them where the scene did not."""
+        def shown(group):
+            return " and ".join(f"{k} = {json.dumps(self[k]) if isinstance(self[k], str) else f'{self[k]:g}'}"
+                                for k in group)
+        given, preset = [k for k in keys if k not in self.from_model], [k for k in keys if k in self.from_model]
+        by = f"{shown(preset)} (set by {self.from_model[preset[0]]})" if preset else ""
+        return " and ".join(part for part in (by, shown(given)) if part)
+
+    def _refuse(self, key, others, why, fix=""):
+        """SceneError: `key` does not go with the keys `others` (why), and how to mend it: `fix`, else, where a
+        model set some of them, the one model that sets `key` so (where `key` was given), or give the keys the
+        model set as well, or drop those given."""
+        preset = [k for k in (key, *others) if k in self.from_model]
+        given = [k for k in (key, *others) if k not in self.from_model]
+        if not fix and preset:
+            models = [m for m, keys in PRESETS.items() if keys.get(key) == self[key]]
+            fix = f"drop {' and '.join(given)} or give {' and '.join(preset)} as well"
+            if given == [key] and len(models) == 1:
+                fix = f'set physics.model = "{models[0]}" (it sets {key} so), or give {" and ".join(preset)} as well'
+        raise SceneError(f"{self._named([key])} does not go with {self._named(others)} ({why})"
+                         + (f"; {fix}" if fix else ""))
 
     def _check_geometry(self):
         dim = self.dim
@@ -589,6 +688,10 @@ class Scene:
             dims = [max(2 * split + 1, d) for d in dims[:self.dim]] + [1] * (3 - self.dim)
         return tuple(dims)
 
+    def particle_count(self):
+        """The particles the scene starts with, counted without making them."""
+        return int(sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"]))
+
     def _lattice_shape(self, block):
         dx = self["fluid.spacing"]
         return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(len(block["min"]))]
@@ -666,7 +769,7 @@ class Scene:
                     NO_SLIP=self["domain.wall_model"] == "no_slip", VERLET=self["time.integrator"] == "verlet",
                     ADAPTIVE_DT=self.adaptive_dt, DFSPH=self.dfsph,
                     MAX_NEIGHBOURS=self.max_neighbours if self.dfsph else 0, LIST_SKIN=self.skin_thousandths,
-                    CELL_SPLIT=self.cell_split)
+                    CELL_SPLIT=self.cell_split, SHIFTING=int(physics["shifting"] == "lind"))
 
     def spec_for(self, backend):
         """The spec a run on `backend` compiles: the scene's, and with the state equation also neighbour
@@ -679,18 +782,17 @@ class Scene:
         (GRADIENT_SLOTS), dfsph_factor also stores each list entry's gradient for the sweeps (GRADIENTS). numba's
         lists are particle-major, Vulkan's slot-major (LIST_BY_PARTICLE), under the state equation in chunks of 4
         slots (LIST_CHUNKS: dfsph.glsl; sphcore.backends.list_entries reads each in particle order)."""
-        from sphcore.memory import particle_count
-        from sphcore.sph.dfsph import list_width
+        from sphcore.sph.dfsph import list_width  # (numba: loaded where a run starts, not to read a scene)
 
         spec = self.spec
-        if not spec.DFSPH and particle_count(self) * list_width(self.max_neighbours) <= LIST_WORDS.get(backend, 0):
+        if not spec.DFSPH and self.particle_count() * list_width(self.max_neighbours) <= LIST_WORDS.get(backend, 0):
             spec = spec._replace(MAX_NEIGHBOURS=self.max_neighbours)
-        if spec.DFSPH and particle_count(self) * list_width(spec.MAX_NEIGHBOURS) <= GRADIENT_SLOTS.get(backend, 0):
+        if spec.DFSPH and self.particle_count() * list_width(spec.MAX_NEIGHBOURS) <= GRADIENT_SLOTS.get(backend, 0):
             spec = spec._replace(GRADIENTS=True)  # (dfsph_factor stores what the sweeps would compute)
         listed = spec.MAX_NEIGHBOURS > 0
         if spec.LIST_SKIN and not listed:
             raise SceneError(f"physics.list_skin = {self['physics.list_skin']:g}: the {backend} backend holds at most "
-                             f"{LIST_WORDS.get(backend, 0)} list words, and {particle_count(self)} particles with "
+                             f"{LIST_WORDS.get(backend, 0)} list words, and {self.particle_count()} particles with "
                              f"{list_width(self.max_neighbours)} slots each need more; set physics.list_skin = 0")
         return spec._replace(LIST_BY_PARTICLE=backend == "numba" and listed,
                              LIST_CHUNKS=backend == "vulkan" and listed and not spec.DFSPH)
@@ -708,15 +810,24 @@ class Scene:
             viscosity_model=self["physics.viscosity_model"], alpha=self["fluid.alpha"],
             cfl_number=(self["time.cfl_number"] / self["fluid.smoothing_ratio"] if self.dfsph
                         else 0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0),
-            reach=self.reach, cell_split=self.cell_split)
+            reach=self.reach, cell_split=self.cell_split, spacing=self["fluid.spacing"],
+            shifting=self["fluid.shifting"] if self["physics.shifting"] != "none" else 0.0)
 
     def to_json(self):
         """Every key as JSON (what scene.json and final.npz keep; Scene.from_dict(json.loads(...)) reads it)."""
         return json.dumps(self.config, sort_keys=True)
 
 
+def preset_note(dotted):
+    """What each physics.model sets `dotted` to, for the meaning of a key a model sets ("" for the others)."""
+    if dotted not in PRESETS[DEFAULT_MODEL]:
+        return ""
+    return " (physics.model: " + ", ".join(f"{m} {json.dumps(keys[dotted])}" for m, keys in PRESETS.items()) + ")"
+
+
 def describe_schema(schema=SCHEMA, prefix=""):
-    """Lines of `key  default  unit  range  doc` for every key (for `sphcore keys` and docs/scenes.md)."""
+    """Lines of `key  default  unit  range  doc` for every key (for `sphcore keys` and docs/scenes.md); the
+    default of a key that physics.model sets is DEFAULT_MODEL's, and its meaning ends with every model's value."""
     lines = []
     for name, key in schema.items():
         path = f"{prefix}{name}"
@@ -724,5 +835,5 @@ def describe_schema(schema=SCHEMA, prefix=""):
             lines += describe_schema(key, f"{path}.")
         else:
             span = key.kind if "|" in key.kind else "" if key.kind in ("str", "bool") else f"[{key.low:g}, {key.high:g}]"
-            lines.append(f"{path:24} {json.dumps(key.default):>12}  {key.unit:8} {span:18} {key.doc}")
+            lines.append(f"{path:24} {json.dumps(key.default):>12}  {key.unit:8} {span:18} {key.doc}{preset_note(path)}")
     return lines

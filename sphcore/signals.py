@@ -12,13 +12,7 @@ every file is written under a temporary name and renamed, so none is left half w
 import signal
 import threading
 
-
-class Interrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM stopped a run; `signum` is the signal (a shell's exit status is 128 + it)."""
-
-    def __init__(self, signum, message=None):
-        self.signum = signum
-        super().__init__(message or f"interrupted by {signal.Signals(signum).name}; files written so far are complete")
+from sphcore.errors import Interrupted
 
 
 class Signals:

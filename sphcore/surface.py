@@ -18,6 +18,7 @@ keeps buffers and pipelines for volumes of one shape (repeated extraction, bench
 """
 import numpy as np
 
+from sphcore.backends import Stage, empty_state, make_backend, neighbour_stages
 from sphcore.mc.classify_cubes import classify_cubes
 from sphcore.mc.emit_cubes import emit_cubes
 from sphcore.mc.emit_vertices import emit_vertices
@@ -26,6 +27,7 @@ from sphcore.mc.sample_field import sample_field
 from sphcore.mc.tables import CASE_EDGES, CASE_VERTICES, CASE_WIDTH
 from sphcore.mc.write_arguments import write_arguments
 from sphcore.params import DEFAULT_SPEC, MC_PARAMS_DTYPE, SHADER_DIR, McSpec, kernel_coefficients, pyramid_levels
+from sphcore.vk_runner import Context, VulkanError, compile_glsl
 from sphcore.workgroups import group_count
 
 METHODS = ("histopyramid", "per_cube")
@@ -250,7 +252,6 @@ class VulkanDevice:
     extraction, emit_vertices dispatched indirectly from the arguments the device wrote."""
 
     def __init__(self, extractor, device=None, validation=None):
-        from sphcore.vk_runner import Context, VulkanError
         self.x = extractor
         self.ctx = Context(device=device, validation=validation)
         if extractor.method == "per_cube" and not self.ctx.subgroup_operations:
@@ -266,7 +267,6 @@ class VulkanDevice:
         return self.ctx.buffer(self.x.length(name) * c * np.dtype(dtype).itemsize, name)
 
     def _pipeline(self, stage):
-        from sphcore.vk_runner import compile_glsl
         if stage not in self.pipelines:
             spirv = compile_glsl(SHADER_DIR / "mc" / f"{stage}.comp")
             pipeline = self.ctx.pipeline(spirv, len(MC_BUFFERS), MC_PARAMS_DTYPE.itemsize, self.x.local_size,
@@ -432,8 +432,6 @@ def particle_surface(scene, position, spacing=None, level=0.5, backend="numba", 
     >>> len(faces) > 0, bool(verts.min() > 0.0) and bool(verts.max() < 1.0)  # a skin around the cube
     (True, True)
     """
-    from sphcore.backends import Stage, empty_state, make_backend, neighbour_stages
-
     if scene.dim != 3:
         raise ValueError(f"a surface needs a 3D scene; {scene['name']} is {scene.dim}D")
     position = np.asarray(position, np.float32)

@@ -93,3 +93,28 @@ def acceleration(x, v, rho, p, mass, h, viscosity, gravity, box_min, box_max, co
                 a[i] -= cohesion * (w[:, None] * r[near]).sum(axis=0)
         a[i] += gravity
     return a
+
+
+def shifting_sums(x, rho, mass, h, spacing, box_min, box_max):
+    """(grad C, div r) of Lind et al. 2012's shifting (shaders/sph/shifting.glsl) with Mueller's kernels: for each i,
+    grad C_i = sum_j (1 + 0.2 (W_ij / W(dx))^4) grad_i W_ij m / rho_j and div r_i = -sum_j r_ij . grad_i W_ij m / rho_j
+    over the other particles and the wall images within h (an image carries its particle's density)."""
+    dim = x.shape[1]
+    _, spiky, _ = coefficients(h, dim)
+    w_dx = (h * h - spacing * spacing) ** 3
+    grad_c = np.zeros_like(x)
+    div_r = np.zeros(len(x))
+    for i in range(len(x)):
+        for k, (xk, _) in enumerate(images(x[i], x, box_min, box_max, h)):
+            r = x[i] - xk
+            rlen = np.sqrt((r**2).sum(axis=1))
+            near = (rlen < h) & (rlen > 0)
+            if k == 0:
+                near[i] = False
+            rl = rlen[near]
+            grad_w = (spiky * (h - rl) ** 2 / rl)[:, None] * r[near]  # grad_i W_ij (spiky < 0: towards j)
+            volume = mass / rho[near]
+            ratio = (h * h - rl**2) ** 3 / w_dx
+            grad_c[i] += (((1 + 0.2 * ratio**4) * volume)[:, None] * grad_w).sum(axis=0)
+            div_r[i] -= (volume * (r[near] * grad_w).sum(axis=1)).sum()
+    return grad_c, div_r

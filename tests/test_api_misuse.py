@@ -18,6 +18,7 @@ from sphcore.simulation import Simulation, SimulationError, run
 # 8 x 12 = 96 particles against the left wall of a 1 m box (tests/test_resume.py's dam)
 SCENE = {
     "name": "dam",
+    "physics": {"model": "graphics"},
     "fluid": {"spacing": 0.05, "blocks": [{"min": [0.0, 0.0], "max": [0.4, 0.6]}]},
     "time": {"dt": 1e-3, "steps": 20, "output_every": 10, "checkpoint_every": 10},
 }
@@ -210,6 +211,7 @@ def test_write_snapshot_refuses_a_folder_that_is_locked(tmp_path):
 # open domain's grid: 10 x 20 cells of h) is left after 0.2 s; by 0.6 s the blob is 1.3 m below it.
 BLOB = {
     "name": "blob",
+    "physics": {"model": "graphics"},
     "domain": {"boundary": "open", "box_min": [0.0, 0.0], "box_max": [0.5, 1.0]},
     "fluid": {"spacing": 0.025, "blocks": [{"min": [0.15, 0.1], "max": [0.35, 0.3]}]},
     "time": {"dt": "auto"},
@@ -219,13 +221,14 @@ BLOB = {
 # nothing stops the fall, and the bound grows with g t
 BLOB_SOFT = {
     "name": "soft",
+    "physics": {"model": "graphics"},
     "domain": {"boundary": "open", "box_min": [0.0, 0.0], "box_max": [0.5, 1.0]},
     "fluid": {"spacing": 0.025, "blocks": [{"min": [0.15, 0.0], "max": [0.35, 0.1]}], "stiffness": 1.0},
     "time": {"dt": "auto"},
 }
 BLOB_3D = {
     "name": "blob3d",
-    "physics": {"dimension": 3},
+    "physics": {"model": "graphics", "dimension": 3},
     "domain": {"boundary": "open", "box_min": [0.0, 0.0, 0.0], "box_max": [0.3, 0.5, 0.3]},
     "fluid": {"spacing": 0.025, "blocks": [{"min": [0.1, 0.1, 0.1], "max": [0.2, 0.2, 0.2]}]},
     "time": {"dt": "auto"},

@@ -37,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # 6 x 8 = 48 particles: compiles once per process, steps in no time
 TOML = """\
 name = "tiny"
+[physics]
+model = "graphics"
 [fluid]
 spacing = 0.05
 blocks = [{ min = [0.1, 0.1], max = [0.4, 0.5] }]
@@ -133,7 +135,7 @@ from sphcore.simulation import run
 backend, precision = sys.argv[2], sys.argv[3]
 
 def scene(spacing):
-    return Scene.from_dict({"name": "m", "physics": {"precision": precision},
+    return Scene.from_dict({"name": "m", "physics": {"model": "graphics", "precision": precision},
                             "fluid": {"spacing": spacing, "blocks": [{"min": [0, 0], "max": [0.5, 0.5]}]},
                             "time": {"dt": 1e-5, "output_every": 1, "checkpoint_every": 1}})
 
@@ -168,10 +170,10 @@ def test_estimate_against_the_measured_peak(backend, precision):
 
 
 def test_vulkan_out_of_memory_suggests_numba_only_where_it_fits(monkeypatch):
-    from sphcore.simulation import _numba_hint
+    from sphcore.runner import _numba_hint
     from sphcore.vk_runner import VulkanError
 
-    scene = Scene.from_dict({"fluid": {"spacing": 0.0005}})
+    scene = Scene.from_dict({"physics": {"model": "graphics"}, "fluid": {"spacing": 0.0005}})
     error = VulkanError("out of device memory: buffer 'particle_x' needs 9.0 MiB (llvmpipe, heap of 8 MiB); "
                         "use fewer particles or a coarser grid, or --backend numba")
     assert str(_numba_hint(error, scene)) == str(error)
@@ -216,7 +218,7 @@ def test_signal_at_a_random_moment(tmp_path, when, signum, seed):
     delay = random.Random(seed).uniform(0, 6 if when == "start-up" else 1)
     scene = tmp_path / "tiny.toml"
     scene.write_text(TOML.replace("steps = 20", "steps = 1000000").replace("checkpoint_every = 10", "checkpoint_every = 50")
-                     .replace('name = "tiny"', 'name = "tiny"\n[physics]\ngravity = false'  # at rest: never blows up
+                     .replace('model = "graphics"', 'model = "graphics"\ngravity = false'  # at rest: never blows up
                               + ('\nneighbour_search = "all_pairs"' if when == "mid-run" else "")))  # fewer kernels to compile
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, "-m", "sphcore", "run", str(scene), "--out", str(out)], cwd=ROOT,

@@ -304,8 +304,8 @@ def test_plot_of_a_damaged_final_state_never_suggests_unpickling(tiny, tmp_path,
 def test_resume_with_an_edited_scene_names_the_key(tiny, tmp_path, capsys):
     out = copy_run(tiny, tmp_path)
     edited = tmp_path / "edited.toml"
-    edited.write_text(TOML.replace("dt = 1e-3", "dt = 2e-3").replace("name = \"tiny\"", "name = \"tiny\"\n"
-                                                                      "[physics]\nviscosity = false"))
+    edited.write_text(TOML.replace("dt = 1e-3", "dt = 2e-3").replace("model = \"graphics\"", "model = \"graphics\"\n"
+                                                                      "viscosity = false"))
     before = contents(out)
     err = one_line_error(["run", "--resume", out, edited], capsys)
     assert (f"{edited} is not the scene of the run in {out} (its scene.json): physics.viscosity: false in "

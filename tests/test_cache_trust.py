@@ -301,7 +301,7 @@ def test_check_spirv():
 
 
 # a 4 x 4 block high in a 2D tank, 20 steps: it falls freely (no wall within reach)
-FALLING = {"name": "falling", "physics": {"dimension": 2},
+FALLING = {"name": "falling", "physics": {"model": "graphics", "dimension": 2},
            "domain": {"box_min": [0.0, 0.0], "box_max": [0.4, 0.4]},
            "fluid": {"blocks": [{"min": [0.18, 0.3], "max": [0.22, 0.34]}], "spacing": 0.01},
            "time": {"dt": 1e-3}}

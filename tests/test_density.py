@@ -62,7 +62,7 @@ def test_kernel_integrals(kernel, dim):
 def test_wendland_lattice_sums_to_rest_density():
     """The lattice mass uses the scene's kernel: a full lattice sums to rho_0 (2D through the shaders'
     mirror; 3D through kernels.glsl's mirror in float32, the shaders' precision)."""
-    scene = Scene.from_dict({"physics": {"kernel": "wendland_c2"}, "domain": {"box_min": [0, 0], "box_max": [0.3, 0.3]},
+    scene = Scene.from_dict({"physics": {"model": "graphics", "kernel": "wendland_c2"}, "domain": {"box_min": [0, 0], "box_max": [0.3, 0.3]},
                              "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.16, 0.2]}], "spacing": 0.02}})
     sim = Simulation(scene, "numba")
     state = in_particle_order(sim.backend.read(), 2)
@@ -73,7 +73,7 @@ def test_wendland_lattice_sums_to_rest_density():
     assert scene.mass == pytest.approx(lattice_mass(0.02, scene.h, 1000.0, 2, "wendland_c2"))
     assert scene.mass != pytest.approx(lattice_mass(0.02, scene.h, 1000.0, 2), rel=1e-3)
     # 3D: sum m W over a cubic lattice around a particle, in float32 as compute_density does
-    scene3 = Scene.from_dict({"physics": {"dimension": 3, "kernel": "wendland_c2"},
+    scene3 = Scene.from_dict({"physics": {"model": "graphics", "dimension": 3, "kernel": "wendland_c2"},
                               "fluid": {"blocks": [{"min": [0.0] * 3, "max": [0.2] * 3}], "spacing": 0.04}})
     params = scene3.params(1)
     kernel_w = kernels(scene3.spec, np.float32)[0]
@@ -86,7 +86,7 @@ def test_wendland_lattice_sums_to_rest_density():
 
 
 def small(dim=2, kernel="wendland_c2", density="continuity", diffusion="fourtakas", **extra):
-    physics = {"dimension": dim, "kernel": kernel, "density": density, "density_diffusion": diffusion,
+    physics = {"model": "graphics", "dimension": dim, "kernel": kernel, "density": density, "density_diffusion": diffusion,
                **extra.pop("physics", {})}
     return Scene.from_dict({
         "physics": physics,
@@ -159,7 +159,7 @@ def test_continuity_block_at_rest_stays_at_rest():
     on it (Molteni's does not: it pulls the column towards uniform density), and the tank stays still."""
     tank = {"domain": {"box_min": [0.0, 0.0], "box_max": [0.2, 0.4]},
             "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.3]}], "spacing": 0.02}, "time": {"dt": "auto"}}
-    scene = Scene.from_dict({"physics": {"density": "continuity", "density_diffusion": "fourtakas",
+    scene = Scene.from_dict({"physics": {"model": "graphics", "density": "continuity", "density_diffusion": "fourtakas",
                                          "kernel": "wendland_c2"}, **tank})
     sim = Simulation(scene, "numba")
     rates = {"fourtakas": np.abs(sim.backend.state["particle_drho"]).max()}
@@ -187,7 +187,7 @@ def test_a_wall_pushes_off_a_particle_pressed_onto_it(open_backend, backend):
     from sphcore.validate import configs
 
     dx = 0.01
-    data = {"physics": {"dimension": 2, "equation_of_state": "linear"},
+    data = {"physics": {"model": "graphics", "dimension": 2, "equation_of_state": "linear"},
             "domain": {"box_min": [0.0, 0.0], "box_max": [0.2, 0.4]},
             "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.1]}], "spacing": dx, "stiffness": 400.0},
             "time": {"dt": "auto"}}
@@ -208,7 +208,7 @@ def test_a_wall_pushes_off_a_particle_pressed_onto_it(open_backend, backend):
 
 def test_initial_density_is_hydrostatic():
     for eos in ("linear", "tait"):
-        scene = Scene.from_dict({"physics": {"density": "continuity", "equation_of_state": eos},
+        scene = Scene.from_dict({"physics": {"model": "graphics", "density": "continuity", "equation_of_state": eos},
                                  "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.4]}], "spacing": 0.02}})
         x = scene.initial_positions()
         rho = scene.initial_density(x)
@@ -216,16 +216,16 @@ def test_initial_density_is_hydrostatic():
         k = scene["fluid.stiffness"]
         pressure = k * (rho - 1000.0) if eos == "linear" else 1000.0 * k / 7 * ((rho / 1000.0) ** 7 - 1)
         np.testing.assert_allclose(pressure, 1000.0 * 9.81 * depth, rtol=1e-6)  # x is float32
-    summation = Scene.from_dict({"fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.4]}], "spacing": 0.02}})
+    summation = Scene.from_dict({"physics": {"model": "graphics"}, "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.4]}], "spacing": 0.02}})
     assert (summation.initial_density(summation.initial_positions()) == 1000.0).all()
 
 
-BAD = [({"physics": {"kernel": "cubic"}}, "physics.kernel"),
-       ({"physics": {"density": "integral"}}, "physics.density"),
-       ({"physics": {"density_diffusion": "antuono"}}, "physics.density_diffusion"),
-       ({"physics": {"density_diffusion": "molteni"}}, "physics.density_diffusion"),
-       ({"physics": {"density": "continuity"}, "fluid": {"density_diffusion": 2.0}}, "fluid.density_diffusion"),
-       ({"physics": {"density": "continuity"}, "fluid": {"density_diffusion": "big"}}, "fluid.density_diffusion")]
+BAD = [({"physics": {"model": "graphics", "kernel": "cubic"}}, "physics.kernel"),
+       ({"physics": {"model": "graphics", "density": "integral"}}, "physics.density"),
+       ({"physics": {"model": "graphics", "density_diffusion": "antuono"}}, "physics.density_diffusion"),
+       ({"physics": {"model": "graphics", "density_diffusion": "molteni"}}, "physics.density_diffusion"),
+       ({"physics": {"model": "graphics", "density": "continuity"}, "fluid": {"density_diffusion": 2.0}}, "fluid.density_diffusion"),
+       ({"physics": {"model": "graphics", "density": "continuity"}, "fluid": {"density_diffusion": "big"}}, "fluid.density_diffusion")]
 
 
 @pytest.mark.parametrize("data, key", BAD, ids=[k for _, k in BAD])
@@ -236,7 +236,7 @@ def test_bad_values_are_rejected_naming_the_key(data, key):
 
 def test_diffusion_with_summation_names_both_keys():
     with pytest.raises(SceneError) as e:
-        Scene.from_dict({"physics": {"density_diffusion": "fourtakas"}})
+        Scene.from_dict({"physics": {"model": "graphics", "density_diffusion": "fourtakas"}})
     assert "physics.density_diffusion" in str(e.value) and "physics.density" in str(e.value).replace(
         "physics.density_diffusion", "")
 
@@ -247,7 +247,7 @@ def test_resume_with_continuity_density_is_bitwise(backend, tmp_path):
     from sphcore.simulation import run
     if backend == "vulkan":
         vulkan_or_skip()
-    data = {"name": "dam", "physics": {"density": "continuity", "density_diffusion": "fourtakas",
+    data = {"name": "dam", "physics": {"model": "graphics", "density": "continuity", "density_diffusion": "fourtakas",
                                        "kernel": "wendland_c2"},
             "fluid": {"spacing": 0.05, "blocks": [{"min": [0.0, 0.0], "max": [0.4, 0.6]}]},
             "time": {"dt": 1e-3, "steps": 120, "output_every": 40, "checkpoint_every": 60}}

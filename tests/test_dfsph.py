@@ -13,9 +13,10 @@ import pytest
 from conftest import VALIDATION, assert_stage_agrees, scene_changed, schedule_dependent, vulkan_or_skip
 from reference import neighbours
 from sphcore.backends import Stage, empty_state, list_entries, make_backend, plan
-from sphcore.pressure_solver import ConvergenceWarning, init_state
+from sphcore.errors import ConvergenceWarning
 from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation, SimulationError, run
+from sphcore.solvers.dfsph import init_state
 from sphcore.sph.dfsph import (CONTROL_FINISHED, IMAGE_SHIFT, NEIGHBOUR_MASK, SOLVE_DENSITY, SOLVE_DIVERGENCE,
                                SOLVE_WARM_START, dispatch_base)
 from sphcore.workgroups import group_count
@@ -23,7 +24,7 @@ from sphcore.workgroups import group_count
 # a 2D water column (10 x 10 particles) in a 0.3 m x 0.2 m tank: it starts to collapse
 SCENE = {
     "name": "dfsph",
-    "physics": {"pressure_solver": "dfsph"},
+    "physics": {"model": "graphics", "pressure_solver": "dfsph"},
     "domain": {"box_min": [0.0, 0.0], "box_max": [0.3, 0.2]},
     "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.1, 0.1]}], "spacing": 0.01, "viscosity": 2.0,
               "max_iterations": 40},

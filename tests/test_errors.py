@@ -21,6 +21,8 @@ from sphcore.simulation import SimulationError, run, stable_dt
 # 6 x 6 = 36 particles: every scene below is tiny.
 TINY = """\
 name = "tiny"
+[physics]
+model = "graphics"
 [fluid]
 spacing = 0.05
 blocks = [{ min = [0.3, 0.4], max = [0.6, 0.7] }]
@@ -242,6 +244,7 @@ def blow_up_scene():
     # inf/NaN after a dozen steps (step 13 with the numba mirrors).
     return Scene.from_dict({
         "name": "blowup",
+        "physics": {"model": "graphics"},
         "fluid": {"spacing": 0.05, "blocks": [{"min": [0.3, 0.4], "max": [0.6, 0.7]}],
                   "stiffness": 1e8, "viscosity": 1e5},
         "time": {"dt": 0.05, "steps": 40, "output_every": 5},
@@ -282,6 +285,8 @@ def test_blow_up_through_cli(tmp_path, capsys):
     scene = blow_up_scene()
     path = write(tmp_path, "\n".join([
         'name = "blowup"',
+        "[physics]",
+        'model = "graphics"',
         "[fluid]",
         "spacing = 0.05",
         "blocks = [{ min = [0.3, 0.4], max = [0.6, 0.7] }]",

@@ -19,6 +19,8 @@ from sphcore.simulation import CHECKPOINT
 # 6 x 6 = 36 particles falling; a checkpoint every 10 steps, a snapshot every 5
 TOML = """\
 name = "tiny"
+[physics]
+model = "graphics"
 [fluid]
 spacing = 0.05
 blocks = [{ min = [0.3, 0.4], max = [0.6, 0.7] }]

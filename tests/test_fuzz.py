@@ -28,6 +28,7 @@ FUZZ = settings(deadline=None, derandomize=True, database=None, suppress_health_
 
 BASE = {
     "name": "tiny",
+    "physics": {"model": "graphics"},
     "fluid": {"spacing": 0.05, "blocks": [{"min": [0.3, 0.4], "max": [0.6, 0.7]}]},
     "time": {"dt": 1e-3, "steps": 3, "output_every": 2, "checkpoint_every": 2},
 }
@@ -180,7 +181,7 @@ def whole_scenes(draw):
     for name in ("rest_density", "stiffness", "viscosity", "cohesion"):
         key = KEYS[f"fluid.{name}"]
         fluid[name] = draw(st.one_of(st.sampled_from([key.low, key.high]), st.floats(key.low, key.high)))
-    physics = {"dimension": dim}
+    physics = {"model": "graphics", "dimension": dim}
     for name in ("neighbour_search", "equation_of_state", "viscosity", "surface_tension", "gravity"):
         physics[name] = draw(st.sampled_from(KEYS[f"physics.{name}"].kind.split("|"))
                              if "|" in KEYS[f"physics.{name}"].kind else st.booleans())

@@ -15,7 +15,7 @@ BOX = 0.3
 def scene_for(dim, search="grid", boundary="walls", spacing=0.02, ratio=2.0):
     """A box of side BOX; h = ratio x spacing (from 3 x spacing on, cells of h / 2: Scene.cell_split)."""
     return Scene.from_dict({
-        "physics": {"dimension": dim, "neighbour_search": search},
+        "physics": {"model": "graphics", "dimension": dim, "neighbour_search": search},
         "domain": {"box_min": [0.0] * dim, "box_max": [BOX] * dim, "boundary": boundary},
         "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.1] * dim}], "spacing": spacing, "smoothing_ratio": ratio},
     })
@@ -157,7 +157,7 @@ def test_vulkan_sort_is_bitwise_the_numba_sort(open_backend, dim):
     """Counts, pyramid, offsets and sorted order equal bit for bit, whatever order the GPU's
     atomics handed out the slots in (several steps, so particles move between cells)."""
     scene = Scene.from_dict({
-        "physics": {"dimension": dim},
+        "physics": {"model": "graphics", "dimension": dim},
         "domain": {"box_min": [0.0] * dim, "box_max": [0.4] * dim},
         "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.16, 0.2, 0.16][:dim]}], "spacing": 0.02},
     })
@@ -242,7 +242,7 @@ def test_disabled_terms_are_compiled_out_of_the_mirror():
             "fluid": {"blocks": [{"min": [0.05, 0.05], "max": [0.15, 0.15]}], "spacing": 0.02, "viscosity": 50.0}}
     acc = {}
     for on in (True, False):
-        scene = Scene.from_dict({**base, "physics": {"viscosity": on}})
+        scene = Scene.from_dict({**base, "physics": {"model": "graphics", "viscosity": on}})
         sim = Simulation(scene, "numba")
         sim.backend.state["particle_v"][:, 0] = np.linspace(-1, 1, sim.n)
         for stage in sim.stages[:-1]:

@@ -31,7 +31,7 @@ def test_kernels_integrate_to_one(h, dim):
 def small_scene(dim=2, search="grid", tait=False, cohesion=0.0, **fluid):
     box = [0.3] * dim
     return Scene.from_dict({
-        "physics": {"dimension": dim, "neighbour_search": search, "surface_tension": cohesion > 0,
+        "physics": {"model": "graphics", "dimension": dim, "neighbour_search": search, "surface_tension": cohesion > 0,
                     "equation_of_state": "tait" if tait else "linear"},
         "domain": {"box_min": [0.0] * dim, "box_max": box},
         "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.16, 0.2, 0.1][:dim]}], "spacing": 0.02,
@@ -42,7 +42,7 @@ def small_scene(dim=2, search="grid", tait=False, cohesion=0.0, **fluid):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_lattice_interior_density_is_rest_density(dim):
-    scene = Scene.from_dict({"physics": {"dimension": dim}, "domain": {"box_min": [0] * dim, "box_max": [1] * dim},
+    scene = Scene.from_dict({"physics": {"model": "graphics", "dimension": dim}, "domain": {"box_min": [0] * dim, "box_max": [1] * dim},
                              "fluid": {"blocks": [{"min": [0.2] * dim, "max": [0.6] * dim}], "spacing": 0.04}})
     sim = Simulation(scene, "numba")
     run_until(sim, "compute_density")

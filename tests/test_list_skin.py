@@ -21,7 +21,7 @@ from sphcore.sph.dfsph import CONTROL_BUILDS, CONTROL_REBUILD, IMAGE_SHIFT, NEIG
 # corner region and moves at about 1 m/s, 0.01 h a step (a build every ten steps or so at skin 0.2)
 SCENE = {
     "name": "skin",
-    "physics": {"equation_of_state": "tait", "list_skin": 0.2},
+    "physics": {"model": "graphics", "equation_of_state": "tait", "list_skin": 0.2},
     "domain": {"box_min": [0.0, 0.0], "box_max": [0.6, 0.4]},
     "fluid": {"spacing": 0.01, "blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.3]}], "stiffness": 900.0,
               "viscosity": 0.5},
@@ -29,7 +29,7 @@ SCENE = {
 }
 SCENE_3D = {
     "name": "skin3d",
-    "physics": {"dimension": 3, "equation_of_state": "tait", "list_skin": 0.25},
+    "physics": {"model": "graphics", "dimension": 3, "equation_of_state": "tait", "list_skin": 0.25},
     "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.4, 0.3, 0.2]},
     "fluid": {"spacing": 0.02, "blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.16, 0.2, 0.2]}], "stiffness": 900.0,
               "viscosity": 0.5},
@@ -170,7 +170,7 @@ def test_a_run_counts_its_builds(tmp_path, capsys):
     """`sphcore run` says how often the lists were built, and so does final.npz: more than at the start, fewer than
     every step (the snapshots every 50 steps each ask for one)."""
     scene_file = tmp_path / "skin.toml"
-    scene_file.write_text('name = "skin"\n[physics]\nequation_of_state = "tait"\nlist_skin = 0.2\n'
+    scene_file.write_text('name = "skin"\n[physics]\nmodel = "graphics"\nequation_of_state = "tait"\nlist_skin = 0.2\n'
                           '[domain]\nbox_max = [0.6, 0.4]\n'
                           '[fluid]\nspacing = 0.01\nblocks = [{min = [0.0, 0.0], max = [0.2, 0.3]}]\nstiffness = 900.0\n'
                           'viscosity = 0.5\n[time]\ndt = 2e-4\nsteps = 200\noutput_every = 50\n')  # (SCENE's)

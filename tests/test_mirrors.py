@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from sphcore.params import PARAMS_DTYPE, SHADER_DIR, dtype_from_glsl_block
+from sphcore.params import DISPATCH_DTYPE, PARAMS_DTYPE, SHADER_DIR, dtype_from_glsl_block
 
 ROOT = Path(__file__).resolve().parent.parent
 SHADERS = sorted(SHADER_DIR.rglob("*.comp"))
@@ -76,4 +76,5 @@ def test_parameter_layout_follows_std430():
     text = "uniform B { uint n; float a; vec2 g; float b; vec3 c; float d; } P;"
     dtype = dtype_from_glsl_block(text)
     assert [dtype.fields[k][1] for k in ("n", "a", "g", "b", "c", "d")] == [0, 4, 8, 16, 32, 44]
-    assert PARAMS_DTYPE.itemsize <= 128, "push constants beyond the 128 bytes every device supports"
+    assert PARAMS_DTYPE.itemsize <= 16384, "a uniform buffer beyond the 16 KiB every device supports"
+    assert DISPATCH_DTYPE.itemsize <= 128, "push constants beyond the 128 bytes every device supports"

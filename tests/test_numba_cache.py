@@ -33,7 +33,7 @@ def probe(names=tuple(CASES)):
     out = {}
     for name in names:
         kernel, precision, dim = CASES[name]
-        scene = Scene.from_dict({"physics": {"dimension": dim, "kernel": kernel, "precision": precision,
+        scene = Scene.from_dict({"physics": {"model": "graphics", "dimension": dim, "kernel": kernel, "precision": precision,
                                              "neighbour_search": "all_pairs"},
                                  "domain": {"boundary": "open", "box_min": [-1.0] * dim, "box_max": [1.0] * dim},
                                  "forces": {"gravity": [0.0] * dim},
@@ -95,7 +95,7 @@ def probe_cells(dims):
 
     out = {}
     for dim in dims:
-        scene = Scene.from_dict({"physics": {"dimension": dim}, "forces": {"gravity": [0.0] * dim},
+        scene = Scene.from_dict({"physics": {"model": "graphics", "dimension": dim}, "forces": {"gravity": [0.0] * dim},
                                  "domain": {"box_min": [0.0] * dim, "box_max": [0.1] * dim},
                                  "fluid": {"blocks": [{"min": [0.0] * dim, "max": [0.05] * dim}], "spacing": 0.01}})
         x = scene.initial_positions()

@@ -69,6 +69,7 @@ def test_tank_at_rest_is_hydrostatic_and_stays_so(open_backend, dim, backend):
 
 def zero_gravity_blob(**fluid):
     return Scene.from_dict({
+        "physics": {"model": "graphics"},
         "domain": {"box_min": [0.0, 0.0], "box_max": [1.0, 1.0]},
         "fluid": {"blocks": [{"min": [0.4, 0.4], "max": [0.6, 0.6]}], "spacing": 0.01, **fluid},
         "forces": {"gravity": [0.0, 0.0]},
@@ -174,7 +175,7 @@ def test_without_surface_tension_the_cube_stays_square(open_backend):
 def test_a_particle_clamped_onto_a_wall_is_inside():
     """float32(1.2) > 1.2: the box check must compare with the walls the shaders use (float32)."""
     from sphcore.simulation import Simulation
-    scene = Scene.from_dict({"physics": {"dimension": 3}, "domain": {"box_max": [1.2, 0.6, 0.3]},
+    scene = Scene.from_dict({"physics": {"model": "graphics", "dimension": 3}, "domain": {"box_max": [1.2, 0.6, 0.3]},
                              "fluid": {"blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.1, 0.1, 0.1]}], "spacing": 0.02}})
     sim = Simulation(scene, "numba")
     x = sim.backend.state["particle_x"]

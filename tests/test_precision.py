@@ -33,7 +33,7 @@ def corner_3d():
     case's (numba compiles each stage per spec and precision, ~20 s for the sort's stages)."""
     return Scene.from_dict({
         "name": "corner_3d",
-        "physics": {"dimension": 3, "neighbour_search": "all_pairs", "equation_of_state": "tait",
+        "physics": {"model": "graphics", "dimension": 3, "neighbour_search": "all_pairs", "equation_of_state": "tait",
                     "surface_tension": True, "precision": "float64"},
         "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.12, 0.1, 0.1]},
         "fluid": {"spacing": 0.01, "blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.06, 0.06, 0.06]}],
@@ -155,7 +155,9 @@ def test_float64_on_a_device_without_shader_float64(tmp_path, capsys, monkeypatc
     from sphcore.vk_runner import Context
     monkeypatch.setattr(Context, "_supports_float64", lambda self: False)
     path = tmp_path / "scene.toml"
-    path.write_text(scene_path("cube_drop_2d").read_text() + '\n[physics]\nprecision = "float64"\n')
+    text = scene_path("cube_drop_2d").read_text()
+    assert '\nmodel = "graphics"' in text  # (its [physics] table)
+    path.write_text(text.replace('\nmodel = "graphics"', '\nmodel = "graphics"\nprecision = "float64"'))
     code = main(["run", str(path), "--backend", "vulkan", "--steps", "1", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 1, err

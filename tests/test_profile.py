@@ -13,7 +13,7 @@ from sphcore.simulation import Simulation
 
 
 def small_scene(**physics):
-    return Scene.from_dict({"physics": physics, "domain": {"box_max": [0.3, 0.3]},
+    return Scene.from_dict({"physics": {"model": "graphics", **physics}, "domain": {"box_max": [0.3, 0.3]},
                             "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.1, 0.1]}]}})
 
 
@@ -35,7 +35,7 @@ def test_profile_times_every_stage_as_often_as_the_plan_runs_it(backend):
 @pytest.mark.parametrize("boundary", ["walls", "open"])
 @pytest.mark.parametrize("split", [1, 2])
 def test_pair_tests_count_every_candidate_in_the_cells_around(boundary, split):
-    scene = Scene.from_dict({"domain": {"boundary": boundary, "box_max": [0.3, 0.2]},
+    scene = Scene.from_dict({"physics": {"model": "graphics"}, "domain": {"boundary": boundary, "box_max": [0.3, 0.2]},
                              "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.3, 0.2]}],
                                        "smoothing_ratio": 2.0 * split}})
     assert scene.cell_split == split

@@ -16,6 +16,7 @@ import pytest
 
 from conftest import BACKENDS, vulkan_or_skip
 from sphcore.cli import main
+from sphcore.params import PARAMS_DTYPE
 from sphcore.scene import Scene
 from sphcore.simulation import CARRIED, CHECKPOINT, Interrupted, Simulation, load_checkpoint, resume, run
 
@@ -24,11 +25,14 @@ STEPS = 150
 # bound 0.25 h / (c + sqrt(2 g 0.6 m)) = 0.25 * 0.1 m / (20 + 3.4) m/s = 1.07e-3 s.
 SCENE = {
     "name": "dam",
+    "physics": {"model": "graphics"},
     "fluid": {"spacing": 0.05, "blocks": [{"min": [0.0, 0.0], "max": [0.4, 0.6]}]},
     "time": {"dt": 1e-3, "steps": STEPS, "output_every": 20, "checkpoint_every": 50},
 }
 TOML = """\
 name = "dam"
+[physics]
+model = "graphics"
 [fluid]
 spacing = 0.05
 blocks = [{ min = [0.0, 0.0], max = [0.4, 0.6] }]
@@ -158,6 +162,12 @@ def test_resume_refusals(tmp_path, capsys):
     assert f"{scene_json}: " in err and "needed to resume" in err
     scene_json.write_text(kept)
 
+    with np.load(tmp_path / CHECKPOINT) as data:  # an earlier version's: its parameter block 8 bytes shorter
+        members = dict(data)
+    np.savez(tmp_path / CHECKPOINT, **{**members, "params": members["params"][:-8]})
+    err = error("run", "--resume", tmp_path)
+    assert f"field params: holds {PARAMS_DTYPE.itemsize - 8} bytes" in err and "another version of sphcore" in err
+
     (tmp_path / CHECKPOINT).write_bytes(b"PK\x03\x04 half a zip")
     err = error("run", "--resume", tmp_path)
     assert f"{tmp_path / CHECKPOINT}: not a readable checkpoint" in err
@@ -234,7 +244,7 @@ def test_signal_stops_cleanly_and_the_run_resumes(tmp_path, capsys, signum, back
 # 50 steps (its chunks), where a signal may stop it and write a checkpoint, but reads the state only every 200.
 SKIN_SCENE = {
     "name": "skin",
-    "physics": {"equation_of_state": "tait", "list_skin": 0.2},
+    "physics": {"model": "graphics", "equation_of_state": "tait", "list_skin": 0.2},
     "domain": {"box_min": [0.0, 0.0], "box_max": [0.6, 0.4]},
     "fluid": {"spacing": 0.02, "blocks": [{"min": [0.0, 0.0], "max": [0.2, 0.3]}], "stiffness": 900.0,
               "viscosity": 0.5},

@@ -24,7 +24,7 @@ BOX = {"min": [0.15, 0.0, 0.1], "max": [0.25, 0.15, 0.3]}
 def tank(obstacles=None, blocks=None, spacing=0.02, **fluid):
     """A 0.4 m tank with `obstacles`, Tait, viscosity and gravity: the benchmark's constants."""
     return Scene.from_dict({
-        "physics": {"dimension": 3, "equation_of_state": "tait"},
+        "physics": {"model": "graphics", "dimension": 3, "equation_of_state": "tait"},
         "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.4, 0.4, 0.4], "obstacles": [BOX] if obstacles is None else obstacles},
         "fluid": {"spacing": spacing, "blocks": blocks or [{"min": [0.0, 0.0, 0.0], "max": [0.1, 0.1, 0.1]}],
                   "stiffness": 400.0, "viscosity": 0.5, **fluid},
@@ -134,7 +134,7 @@ def test_2d_a_particle_that_ends_a_step_in_a_box_is_put_onto_its_nearest_face(op
     """integrate alone, in 2D, on a box standing on the floor: the nearest face (never the floor,
     which the box continues through), the normal speed reversed and scaled by the restitution."""
     scene = Scene.from_dict({
-        "physics": {"gravity": False}, "walls": {"restitution": 0.5}, "time": {"dt": 1e-3},
+        "physics": {"model": "graphics", "gravity": False}, "walls": {"restitution": 0.5}, "time": {"dt": 1e-3},
         "domain": {"box_min": [0.0, 0.0], "box_max": [0.5, 0.5], "obstacles": [{"min": [0.2, 0.0], "max": [0.3, 0.1]}]},
         "fluid": {"blocks": [{"min": [0.0, 0.2], "max": [0.1, 0.3]}]}})
     end = np.array([[0.21, 0.05], [0.29, 0.05], [0.25, 0.09], [0.24, 0.005], [0.205, 0.094], [0.1, 0.05]])

@@ -265,7 +265,7 @@ def test_particle_surface_wraps_the_fluid(backend):
     from sphcore.scene import Scene
     if backend == "vulkan":
         vulkan_or_skip()
-    scene = Scene.from_dict({"name": "cube", "physics": {"dimension": 3, "gravity": False},
+    scene = Scene.from_dict({"name": "cube", "physics": {"model": "graphics", "dimension": 3, "gravity": False},
                              "domain": {"boundary": "open", "box_min": [0.0, 0.0, 0.0], "box_max": [0.3, 0.3, 0.3]},
                              "fluid": {"spacing": 0.01, "blocks": [{"min": [0.1, 0.1, 0.1], "max": [0.2, 0.2, 0.2]}]}})
     x = scene.initial_positions()
@@ -303,7 +303,7 @@ def test_particle_surface_closes_at_the_walls(backend):
     if backend == "vulkan":
         vulkan_or_skip()
     box_max = np.array([0.1, 0.08, 0.09])
-    scene = Scene.from_dict({"name": "corner", "physics": {"dimension": 3, "gravity": False},
+    scene = Scene.from_dict({"name": "corner", "physics": {"model": "graphics", "dimension": 3, "gravity": False},
                              "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": box_max.tolist()},
                              "fluid": {"spacing": 0.01,
                                        "blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.05, 0.04, 0.09]}]}})

@@ -39,6 +39,7 @@ SWITCHES = {
     "domain.obstacles": ("none", "box"),
     "time.integrator": ("symplectic_euler", "verlet"),
     "time.dt": ("auto", "adaptive"),
+    "physics.shifting": ("none", "lind"),
 }
 SEED = 30  # the sample's order of candidates (issue 30)
 SAMPLE_SIZE = 12  # at most; the sample ends once every pair is covered
@@ -48,15 +49,15 @@ ISSUE_30 = {"physics.dimension": 2, "physics.precision": "float32", "physics.ker
             "physics.density": "summation", "physics.density_diffusion": "none", "physics.viscosity_model": "laminar",
             "physics.equation_of_state": "linear", "physics.pressure_solver": "dfsph", "physics.list_skin": 0.0,
             "domain.wall_model": "free_slip", "domain.obstacles": "none", "time.integrator": "symplectic_euler",
-            "time.dt": "auto"}
+            "time.dt": "auto", "physics.shifting": "none"}
 STEPS = 6
 
 # a water block at rest in a tank, in the tank's corner; the obstacle a box beside it, within h of its particles
 BASE = {
-    2: {"name": "matrix", "domain": {"box_min": [0.0, 0.0], "box_max": [0.3, 0.2]},
+    2: {"name": "matrix", "physics": {"model": "graphics"}, "domain": {"box_min": [0.0, 0.0], "box_max": [0.3, 0.2]},
         "fluid": {"spacing": 0.01, "blocks": [{"min": [0.0, 0.0], "max": [0.15, 0.15]}]},
         "forces": {"gravity": [0.0, -9.81]}},
-    3: {"name": "matrix", "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.24, 0.16, 0.12]},
+    3: {"name": "matrix", "physics": {"model": "graphics"}, "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.24, 0.16, 0.12]},
         "fluid": {"spacing": 0.02, "blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.12, 0.12, 0.12]}]},
         "forces": {"gravity": [0.0, -9.81, 0.0]}},
 }

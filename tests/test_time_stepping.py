@@ -21,8 +21,8 @@ MODELS = {"physics": {"viscosity_model": "artificial"}, "domain": {"wall_model":
 
 
 def scene_of(*tables):
-    """A scene from nested dicts merged table by table (later ones win)."""
-    data = {}
+    """A scene of the graphics model from nested dicts merged table by table (later ones win)."""
+    data = {"physics": {"model": "graphics"}}
     for t in tables:
         for k, v in t.items():
             data[k] = {**data.get(k, {}), **v} if isinstance(v, dict) else v
@@ -34,7 +34,7 @@ COLUMN = {"fluid": {"spacing": 0.02, "blocks": [{"min": [0.0, 0.0], "max": [0.3,
 
 
 def test_keys_defaults_spec_and_plan():
-    default = Scene.from_dict(COLUMN)
+    default = scene_of(COLUMN)  # the graphics model's keys
     assert (default["physics.viscosity_model"], default["domain.wall_model"], default["time.integrator"],
             default["fluid.alpha"]) == ("laminar", "free_slip", "symplectic_euler", 0.02)
     spec = default.spec
@@ -140,6 +140,7 @@ def slide(wall_model, obstacle):
     """A layer of fluid (no gravity) sliding at 1 m/s along the floor, or along an obstacle's top."""
     floor = 0.2 if obstacle else 0.0
     return Scene.from_dict({
+        "physics": {"model": "graphics"},
         "domain": {"box_min": [0.0, 0.0], "box_max": [1.0, 0.5], "wall_model": wall_model,
                    "obstacles": [{"min": [0.0, 0.0], "max": [1.0, floor]}] if obstacle else []},
         "fluid": {"spacing": 0.02, "blocks": [{"min": [0.2, floor], "max": [0.8, floor + 0.1]}], "viscosity": 1.0},
@@ -188,7 +189,7 @@ def test_verlet_is_second_order_and_symplectic_euler_first():
     after 0.02 s at dt, dt / 2 against dt / 8 (Verlet). Halving dt divides symplectic Euler's errors by
     about 2 and Verlet's by about 4, and Verlet's energy at dt is the closer one."""
     tank = Scene.from_dict({
-        "physics": {"precision": "float64"},  # float32 round-off (~1e-7 m) would hide Verlet's error at dt / 2
+        "physics": {"model": "graphics", "precision": "float64"},  # float32 round-off (~1e-7 m) would hide Verlet's error at dt / 2
         "domain": {"box_min": [0.0, 0.0], "box_max": [0.6, 0.4]},
         "fluid": {"spacing": 0.02, "viscosity": 0.5,
                   "blocks": [{"min": [0.0, 0.0], "max": [0.3, 0.3]}, {"min": [0.3, 0.0], "max": [0.6, 0.14]}]}})

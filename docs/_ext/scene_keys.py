@@ -5,6 +5,11 @@
         every key of sphcore.scene.SCHEMA (what `sphcore keys` prints): one table per section, a row
         per key with its default (as `sphcore keys` writes it), unit, range, type and meaning.
 
+    ```{scene-models}
+    ```
+        the models of physics.model (sphcore.scene.PRESETS): a row per key a model sets, a column per
+        model, the default model marked.
+
     ```{scene-presets}
     ```
         the named model configurations of sphcore.validate.configs.CONFIGS: the keys each sets (as
@@ -34,8 +39,8 @@ KIND_NAMES = {"float": "number", "int": "integer", "vec": "vector", "str": "stri
 
 def key_rows(schema=None, prefix=""):
     """(section, dotted key, default, unit, range, type, meaning) of every key, in schema order; the
-    default and range written as describe_schema (`sphcore keys`) writes them."""
-    from sphcore.scene import SCHEMA
+    default, range and meaning written as describe_schema (`sphcore keys`) writes them."""
+    from sphcore.scene import SCHEMA, preset_note
 
     schema = SCHEMA if schema is None else schema
     rows = []
@@ -48,7 +53,8 @@ def key_rows(schema=None, prefix=""):
                 else f"[{key.low:g}, {key.high:g}]")
         kind = "choice" if choice else KIND_NAMES.get(key.kind, key.kind)
         section = prefix.rstrip(".") or "(top level)"
-        rows.append((section, f"{prefix}{name}", json.dumps(key.default), key.unit, span, kind, key.doc))
+        rows.append((section, f"{prefix}{name}", json.dumps(key.default), key.unit, span, kind,
+                     key.doc + preset_note(f"{prefix}{name}")))
     return rows
 
 
@@ -154,6 +160,23 @@ class SceneKeys(SphinxDirective):
         return out
 
 
+class SceneModels(SphinxDirective):
+    """The keys each physics.model sets, generated from sphcore.scene.PRESETS."""
+
+    has_content = False
+
+    def run(self):
+        from sphcore.scene import DEFAULT_MODEL, PRESETS
+
+        models = list(PRESETS)
+        body = []
+        for dotted in PRESETS[DEFAULT_MODEL]:
+            body.append(([], [cell(code(dotted))] + [cell(code(toml_value(PRESETS[m][dotted]))) for m in models]))
+        headers = ["key"] + [f"{m} (the default)" if m == DEFAULT_MODEL else m for m in models]
+        return [table("the keys each physics.model sets", headers, [28] + [24] * len(models), body,
+                      ["scene-models"])]
+
+
 class ScenePresets(SphinxDirective):
     """The named model configurations of sphcore.validate.configs, generated from CONFIGS."""
 
@@ -167,7 +190,8 @@ class ScenePresets(SphinxDirective):
         for name, keys in configs.CONFIGS.items():
             notes = []
             if name == configs.DEFAULT_CONFIG:
-                notes.append("the default: every scene gets this model unless it sets the keys.")
+                notes.append("the base every configuration is laid over (the validation cases name the graphics "
+                             "model).")
             if name == configs.RECOMMENDED_CONFIG:
                 notes.append("the recommended model for measured figures.")
             if comments.get(name):
@@ -225,6 +249,7 @@ def setup(app):
     app.add_crossref_type("scene-key", "scene-key", "pair: %s; scene key")
     app.connect("missing-reference", unknown_key)
     app.add_directive("scene-keys", SceneKeys)
+    app.add_directive("scene-models", SceneModels)
     app.add_directive("scene-presets", ScenePresets)
     app.add_directive("shipped-scenes", ShippedScenes)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

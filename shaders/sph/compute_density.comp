@@ -6,8 +6,8 @@
 // (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With neighbour
 // lists (MAX_NEIGHBOURS > 0: DFSPH, and the state equation where they fit, Scene.spec_for) the scan also writes the
 // particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists
-// reused between builds (LIST_SKIN, cells.glsl: list_reach): a build (P.level 0) lists out to list_reach and keeps
-// where each particle was (scratch_x); a step between builds (P.level 1) walks the lists instead of the cells.
+// reused between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps
+// where each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells.
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -115,8 +115,8 @@ void main() {
     //     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
     //     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
     //     takes the place of its axis's wall where nearer (obstacles.glsl). Reused lists (LIST_SKIN): the walls
-    //     within list_reach of where i was at the list's build (this step's position at a build, P.level 0)
-    bool walk = LIST_SKIN > 0u && P.level == 1u;
+    //     within list_reach of where i was at the list's build (this step's position at a build, D.level 0)
+    bool walk = LIST_SKIN > 0u && D.level == 1u;
     real3 x_built = walk ? scratch_x[i].xyz : xi;
     real3 wall;
     uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);

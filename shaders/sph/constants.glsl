@@ -45,3 +45,6 @@ layout(constant_id = 26) const uint LIST_SKIN = 0;        // the state equation'
 layout(constant_id = 27) const uint CELL_SPLIT = 1;       // cells per search reach: 1 (a scan tests the 3^dim cells
                                                           // around a particle's) or 2 (the 5^dim of half the side;
                                                           // Scene.cell_split: supports of 2.5 dx or more)
+// Particle shifting (issue 31): each term a helper in an include, called from the one neighbour walk (walk.glsl).
+layout(constant_id = 28) const uint SHIFTING = 0;         // 0: none, 1: Lind et al. 2012's Fickian shifting
+                                                          // (physics.shifting; shifting.glsl)

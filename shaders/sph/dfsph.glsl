@@ -21,8 +21,8 @@
 // sweeps read it; else they compute it again. The same bits either way on numba and lavapipe (the NVIDIA
 // driver, which fuses multiply-adds where it likes, gives the two ways different last bits).
 // A particle with more than MAX_NEIGHBOURS sets CONTROL_OVERFLOW_STEP; the host stops the run there
-// (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is P.level
-// (1 or 2; for reduce_cells P.level is a pyramid level). The mean residual is reduced in a fixed order
+// (sphcore.pressure_solver), as a cut list would silently lose pairs. The stage's solve is D.level
+// (1 or 2; for reduce_cells D.level is a pyramid level). The mean residual is reduced in a fixed order
 // in two levels: each dfsph_residual work group sums its residuals in order (dfsph_partial), and the
 // last of its work groups to finish (an atomic count, CONTROL_FINISHED) sums those (dfsph_check.glsl).
 // Once the mean is under the tolerance (after the minimum iterations) or the budget is spent, it sets the
@@ -48,9 +48,9 @@
 //   is the pressure p_i = kappa_i rho_i^2 / rho_0). Errors: solve 1
 //   the mean of r_i dt, solve 2 the mean of r_i, against fluid.max_divergence_error and max_density_error.
 
-const uint SOLVE_DIVERGENCE = 1u;       // P.level of the divergence-free solve's stages
-const uint SOLVE_DENSITY = 2u;          // P.level of the constant-density solve's stages
-const uint SOLVE_WARM_START = 3u;       // P.level of dfsph_velocity's warm start of the constant-density solve:
+const uint SOLVE_DIVERGENCE = 1u;       // D.level of the divergence-free solve's stages
+const uint SOLVE_DENSITY = 2u;          // D.level of the constant-density solve's stages
+const uint SOLVE_WARM_START = 3u;       // D.level of dfsph_velocity's warm start of the constant-density solve:
                                         // the acceleration of WARM_START times the last step's stiffness sum
                                         // (particle_kappa) of the particles a first residual finds compressed
                                         // (as SPlisHSPlasH's: an expanding region gets none), before the solve

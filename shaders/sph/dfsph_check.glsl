@@ -1,4 +1,4 @@
-// DFSPH's convergence test of solve P.level (dfsph.glsl), run by the last of dfsph_residual's work groups
+// DFSPH's convergence test of solve D.level (dfsph.glsl), run by the last of dfsph_residual's work groups
 // to finish: the mean residual, summed in a fixed order (the work groups' sums, dfsph_partial; each
 // invocation its strided share of them in index order, then invocation 0 the shares in order: no atomics
 // in the sum, the same bits on every run whichever group finishes last, and up to the arithmetic's

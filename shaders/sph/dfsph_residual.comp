@@ -1,5 +1,5 @@
 #version 460
-// DFSPH's residual r_i of solve P.level (dfsph.glsl), one invocation per particle: the density
+// DFSPH's residual r_i of solve D.level (dfsph.glsl), one invocation per particle: the density
 // ratio's rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor: the neighbours
 // and their wall and obstacle images; an image's velocity mirrored on its flipped axes, as compute_density's
 // continuity rate), summed as v_i . G_i - sum_j V v_j . grad W_ij with G_i = sum_j V grad W_ij, which
@@ -55,7 +55,7 @@ void main() {
     //     invocation of the group reaches the barrier, with a residual of 0 past the last particle
     uint i = gl_GlobalInvocationID.x;
     uint lid = gl_LocalInvocationID.x;
-    uint solve = P.level;
+    uint solve = D.level;
     real residual = real(0.0);
     if (i < P.n) {
         // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)

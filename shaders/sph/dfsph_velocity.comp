@@ -1,5 +1,5 @@
 #version 460
-// One Jacobi update of DFSPH's solve P.level (dfsph.glsl), one invocation per particle: with the
+// One Jacobi update of DFSPH's solve D.level (dfsph.glsl), one invocation per particle: with the
 // stiffness s_j = alpha_j r_j (divergence-free, [1/s]) or alpha_j r_j / dt^2 (constant density, [1/s^2])
 // of every particle from the last dfsph_residual, the change -sum_j V (s_i + s_j) grad W_ij over the
 // neighbour list (dfsph_factor: the neighbours and their wall and obstacle images; an image carries its
@@ -44,7 +44,7 @@ void main() {
     //     invocation 0 counts the update
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
-    uint solve = P.level;
+    uint solve = D.level;
     bool warm = solve == SOLVE_WARM_START;  // the warm start: always, and not counted
     if (!warm && i == 0u) control[CONTROL_ITERATIONS + solve] += 1u;
     // [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm

@@ -2,7 +2,8 @@
 // Time step (integrators.glsl: symplectic Euler or the kick-drift-kick Verlet leapfrog), box walls and
 // obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt.comp wrote
 // into time_state on the device this step (no readback). Reused lists (LIST_SKIN): a particle that has moved
-// too far from where it was at the lists' build asks for the next build (cells.glsl: moved_limit2).
+// too far from where it was at the lists' build asks for the next build (cells.glsl: moved_limit2). With shifting
+// (SHIFTING) the drift is followed by the particle's shift (shifting.glsl), before the walls.
 // Mirror: sphcore/sph/integrate.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -12,10 +13,14 @@ layout(local_size_x_id = 0) in;
 #include "integrators.glsl"
 #include "cells.glsl"
 #include "dfsph.glsl"
+#include "kernels.glsl"
+#include "shifting.glsl"
 
 layout(std430, binding = 0) buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 12) readonly buffer ParticleShift { real4 particle_shift[]; };  // SHIFTING: scratch_v,
+                                                                                             // compute_forces' sums
 layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  // LIST_SKIN: x at the list's build
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 layout(std430, binding = 19) buffer ParticleVh { real4 particle_vh[]; };
@@ -33,6 +38,7 @@ void main() {
     real3 a = particle_a[i].xyz;
     real3 v = drift_velocity(particle_v[i].xyz, particle_vh[i].xyz, a, dt, dt_prev);
     real3 x = particle_x[i].xyz + dt * v;
+    if (SHIFTING > 0u) x += shift_of(particle_shift[i], v, dt);  // (shifting.glsl: Lind et al. 2012)
     // [4] walls: each axis is tested on its own (no else-if), so a particle past a corner is
     //     put back on every wall it crossed in the same step. Clamp the position; an outward
     //     normal speed is reversed and scaled by the restitution, an inward one is kept.

@@ -1,9 +1,11 @@
-// Parameter block shared by every shader (SPH and neighbour grid): one push-constant range,
-// read as `P.name`. The numba mirrors read the same bytes: sphcore/params.py parses this block
-// into a numpy record dtype (std430 offsets), so the two sides cannot drift. All coefficients
-// are folded on the host (sphcore/params.py: fold_parameters); units are SI. In 2D the z
-// components are 0 and unused.
-layout(push_constant) uniform Params {
+// Parameter block shared by every shader (SPH and neighbour grid): a uniform buffer written once per
+// scene, read as `P.name`, and a push constant of what changes from one dispatch to the next, read as
+// `D.name`. The numba mirrors read the same bytes: sphcore/params.py parses both blocks into numpy record
+// dtypes (std140 offsets, which for these scalars and 3-vectors are std430's), so the two sides cannot drift.
+// A new coefficient is one field here and one line in sphcore/params.py's fold_parameters; the block may
+// grow to maxUniformBufferRange (16 KiB on every device). All coefficients are folded on the host; units
+// are SI. In 2D the z components are 0 and unused.
+layout(std140, binding = 63) uniform Params {
     uint n;               // particle count
     float h;              // support radius [m] (every kernel is zero past h)
     float h2;             // h^2 [m^2]
@@ -21,7 +23,6 @@ layout(push_constant) uniform Params {
     float restitution;    // fraction of the normal speed kept on a wall bounce [-]
     float inv_cell;       // 1 / cell size of the neighbour grid [1/m]
     vec3 gravity;         // [m/s^2]
-    uint level;           // HistoPyramid level a reduce_cells dispatch writes (1 = first above the base)
     vec3 box_min;         // walls, and the origin of the neighbour grid [m]
     uint cell_total;      // cells in the grid: grid_dim.x * grid_dim.y * grid_dim.z
     vec3 box_max;         // walls [m]
@@ -33,8 +34,15 @@ layout(push_constant) uniform Params {
                           // (Fourtakas et al. 2019; 0 unless density_diffusion = "fourtakas" and gravity)
     // -- forces, walls and time stepping (issue 12: viscosity_model, wall_model, integrator, dt)
     float cfl_number;     // time.dt = "adaptive": time.dt_fraction * 0.25, dt = cfl_number min(h / (c + |v|max),
-                          // sqrt(h / |a|max)), c^2 = k (choose_dt.comp). The block is now 128 bytes:
-                          // lavapipe's maxPushConstantsSize; a field more must come from a buffer
-    // -- pressure solver (issue 14): no field here (the block is full); fluid.max_density_error,
-    //    max_divergence_error and max_iterations reach the shaders in dfsph_state and control
+                          // sqrt(h / |a|max)), c^2 = k (choose_dt.comp)
+    // -- pressure solver (issue 14): fluid.max_density_error, max_divergence_error and max_iterations
+    //    reach the shaders in dfsph_state and control (the solver writes them there)
+    // -- particle shifting (issue 31: physics.shifting, shifting.glsl)
+    float shifting_coef;  // A h_s [m], h_s = h / 2: D = shifting_coef |v_i| dt (Skillen et al. 2013; fluid.shifting)
+    float shifting_w;     // 1 / kernel_w(dx^2): Lind et al. 2012's W_ij / W(dx) = kernel_w(r2) shifting_w
 } P;
+
+// Per dispatch (push constants: 128 bytes on lavapipe, so only what changes between dispatches).
+layout(push_constant) uniform Dispatch {
+    uint level;           // HistoPyramid level a reduce_cells dispatch writes (1 = first above the base)
+} D;

@@ -4,8 +4,8 @@ The kernel is kernels.glsl's (KERNEL). Summation density, or with CONTINUITY the
 (particle_drho) of the density that integrate.comp integrates, with density diffusion
 (DENSITY_DIFFUSION). With neighbour lists (MAX_NEIGHBOURS > 0) the scan also writes each particle's
 list (dfsph.py), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists reused
-between builds (LIST_SKIN, cells.glsl: list_reach): a build (P.level 0) lists out to list_reach and keeps where
-each particle was (scratch_x); a step between builds (P.level 1) walks the lists instead of the cells.
+between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps where
+each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells.
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -114,6 +114,7 @@ def compute_density(spec, real=np.float32):
                              scratch_x, particle_id, particle_neighbours, obstacle_box, particle_drho, control,
                              neighbours, neighbour_count):
         P = params[0]
+        D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
             return
@@ -134,8 +135,8 @@ def compute_density(spec, real=np.float32):
         #     it (ghost fluid: free-slip boundary of Takeda et al. 1994). Bit a of `mirrored` says
         #     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
         #     takes the place of its axis's wall where nearer (obstacles.glsl). Reused lists (LIST_SKIN): the walls
-        #     within list_reach of where i was at the list's build (this step's position at a build, P.level 0)
-        walk = LIST_SKIN > 0 and P.level == 1
+        #     within list_reach of where i was at the list's build (this step's position at a build, D.level 0)
+        walk = LIST_SKIN > 0 and D.level == 1
         x_built_x = scratch_x[i, 0] if walk else xi_x
         x_built_y = scratch_x[i, 1] if walk else xi_y
         x_built_z = scratch_x[i, 2] if walk else xi_z

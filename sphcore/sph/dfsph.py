@@ -8,9 +8,9 @@ from functools import lru_cache
 
 from numba import njit
 
-SOLVE_DIVERGENCE = 1  # P.level of the divergence-free solve's stages
-SOLVE_DENSITY = 2  # P.level of the constant-density solve's stages
-SOLVE_WARM_START = 3  # P.level of dfsph_velocity's warm start of the constant-density solve
+SOLVE_DIVERGENCE = 1  # D.level of the divergence-free solve's stages
+SOLVE_DENSITY = 2  # D.level of the constant-density solve's stages
+SOLVE_WARM_START = 3  # D.level of dfsph_velocity's warm start of the constant-density solve
 WARM_START = 0.5  # as SPlisHSPlasH: half the last pressure
 
 # control (uint32)

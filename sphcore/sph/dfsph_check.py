@@ -1,4 +1,4 @@
-"""DFSPH's convergence test of solve P.level (dfsph.py), run by the last of dfsph_residual's work groups
+"""DFSPH's convergence test of solve D.level (dfsph.py), run by the last of dfsph_residual's work groups
 to finish: the mean residual in a fixed order (of the work groups' sums) is the solve's error; under the
 tolerance after the minimum iterations, or with the budget spent, the solve's done flag is set and its
 indirect dispatches' work groups zeroed (going on at the end of a window of recorded iterations, the

@@ -1,4 +1,4 @@
-"""DFSPH's residual r_i of solve P.level (dfsph.py), one invocation per particle: the density ratio's
+"""DFSPH's residual r_i of solve D.level (dfsph.py), one invocation per particle: the density ratio's
 rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, each gradient as dfsph_factor computes it
 (stored in neighbour_gradients with GRADIENTS), summed as v_i . G_i - sum_j V v_j . grad W_ij with dfsph_factor's
 G_i = sum_j V grad W_ij (particle_gradient_sum); divergence-free solve
@@ -41,9 +41,10 @@ def dfsph_residual(spec, real=np.float32):
                             particle_residual, neighbours, neighbour_count, neighbour_gradients,
                             particle_gradient_sum):
         P = params[0]
+        D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect); every
         #     invocation of the group reaches the barrier, with a residual of 0 past the last particle
-        solve = int(P.level)
+        solve = int(D.level)
         residual = real(0.0)
         if i >= P.n:
             return residual

@@ -1,4 +1,4 @@
-"""One Jacobi update of DFSPH's solve P.level (dfsph.py), one invocation per particle: the change
+"""One Jacobi update of DFSPH's solve D.level (dfsph.py), one invocation per particle: the change
 -sum_j V (s_i + s_j) grad W_ij over its neighbour list, each gradient as dfsph_factor computes it (stored in
 neighbour_gradients with GRADIENTS), s_j = alpha_j r_j (divergence-free)
 or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
@@ -33,11 +33,12 @@ def dfsph_velocity(spec, real=np.float32):
                             time_state, particle_alpha, particle_residual, control, particle_kappa,
                             neighbours, neighbour_count, neighbour_gradients, particle_vstar):
         P = params[0]
+        D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
         # [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
         #     invocation 0 counts the update
         if i >= P.n:
             return
-        solve = int(P.level)
+        solve = int(D.level)
         warm = solve == SOLVE_WARM_START  # the warm start: always, and not counted
         if not warm and i == 0:
             control[CONTROL_ITERATIONS + solve] += 1

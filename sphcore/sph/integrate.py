@@ -1,7 +1,8 @@
 """Time step (integrators.py: symplectic Euler or the kick-drift-kick Verlet leapfrog), box walls and
 obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt wrote into
 time_state this step. Reused lists (LIST_SKIN): a particle that has moved too far from where it was at the
-lists' build asks for the next build (cells.glsl: moved_limit2).
+lists' build asks for the next build (cells.glsl: moved_limit2). With shifting (SHIFTING) the drift is followed
+by the particle's shift (shifting.py), before the walls.
 
 Mirror of shaders/sph/integrate.comp: same names, same statement order, same step labels.
 A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -14,6 +15,7 @@ from numba import njit
 from sphcore.sph.cells import skin
 from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.integrators import integrators
+from sphcore.sph.shifting import shifting
 from sphcore.workgroups import launcher
 
 
@@ -25,10 +27,12 @@ def integrate(spec, real=np.float32):
     drift_velocity, stored_velocity = integrators(spec, real)[2:]
     moved_limit2 = skin(spec, real)[2]
     LIST_SKIN = spec.LIST_SKIN
+    SHIFTING = spec.SHIFTING
+    shift_of = shifting(spec, real)[1]
 
     @njit
     def integrate_main(i, params, particle_x, particle_v, particle_a, scratch_x, obstacle_box, particle_vh, time_state,
-                       control):
+                       control, particle_shift):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
@@ -43,6 +47,12 @@ def integrate(spec, real=np.float32):
         x_x = particle_x[i, 0] + dt * v_x
         x_y = particle_x[i, 1] + dt * v_y
         x_z = particle_x[i, 2] + dt * v_z
+        if SHIFTING > 0:  # (shifting.glsl: Lind et al. 2012)
+            s_x, s_y, s_z = shift_of(P, particle_shift[i, 0], particle_shift[i, 1], particle_shift[i, 2],
+                                     particle_shift[i, 3], v_x, v_y, v_z, dt)
+            x_x += s_x
+            x_y += s_y
+            x_z += s_z
         # [4] walls: each axis is tested on its own (no else-if), so a particle past a corner is
         #     put back on every wall it crossed in the same step. Clamp the position; an outward
         #     normal speed is reversed and scaled by the restitution, an inward one is kept.

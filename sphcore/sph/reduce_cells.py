@@ -1,4 +1,4 @@
-"""Build HistoPyramid level P.level from the level below: each node is the sum of its 8
+"""Build HistoPyramid level D.level from the level below: each node is the sum of its 8
 children (seed 2's reduction, over the cells in index order). One invocation per node.
 
 Mirror of shaders/sph/reduce_cells.comp: same names, same statement order, same step labels.
@@ -17,19 +17,20 @@ def reduce_cells(spec, real=np.float32):
     @njit
     def reduce_cells_main(node, params, cell_pyramid):
         P = params[0]
-        # [1] one invocation per node of level P.level
-        size = level_size(P.cell_total, P.level)
+        D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
+        # [1] one invocation per node of level D.level
+        size = level_size(P.cell_total, D.level)
         if node >= size:
             return
         # [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
-        below = level_offset(P.cell_total, P.level - 1)
-        below_size = level_size(P.cell_total, P.level - 1)
+        below = level_offset(P.cell_total, D.level - 1)
+        below_size = level_size(P.cell_total, D.level - 1)
         total = 0
         for k in range(8):
             child = 8 * node + k
             if child < below_size:
                 total += cell_pyramid[below + child]
         # [3] store
-        cell_pyramid[level_offset(P.cell_total, P.level) + node] = total
+        cell_pyramid[level_offset(P.cell_total, D.level) + node] = total
 
     return launcher(reduce_cells_main)

@@ -49,10 +49,13 @@ from pathlib import Path
 
 import numpy as np
 
+from tqdm import tqdm
+
+from sphcore.errors import SimulationError
 from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError, stable_dt
 from sphcore.signals import Interrupted, Signals
-from sphcore.validate import DATA_DIR, configs
+from sphcore.validate import DATA_DIR, configs, sensors
 from sphcore.validate.files import read_csv, read_json
 from sphcore.validate.sensors import wall_pressure
 
@@ -156,7 +159,8 @@ def buchner_scene(settings=None):
     h = s["smoothing_ratio"] * dx
     data = {
         "name": "dam_break_pressure",
-        "physics": {"dimension": 2, "equation_of_state": s["equation_of_state"], "precision": s["precision"]},
+        "physics": {"model": "graphics", "dimension": 2, "equation_of_state": s["equation_of_state"],
+                    "precision": s["precision"]},  # the configuration's keys are laid over the graphics model
         "domain": {"box_min": [0.0, 0.0], "box_max": [TANK_LENGTH * H, TANK_HEIGHT]},
         "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [2 * H, H]}], "spacing": dx,
                   "smoothing_ratio": s["smoothing_ratio"], "stiffness": c * c,
@@ -185,9 +189,7 @@ def sample_run(scene, backend, t_end, sample_dt, sample, progress=True, desc="",
     particles, steps, stepping seconds (wall_s), the device, the error that stopped the run (None if it
     ran to the end) and the signal that did (SIGINT or SIGTERM: the run stops at the next sample, or at
     once on a second signal; None), so that the caller writes what was sampled, then raises `stop(info)`."""
-    from tqdm import tqdm
-
-    from sphcore.simulation import Simulation, SimulationError
+    from sphcore.simulation import Simulation  # (numba: loaded where a run starts)
 
     every = max(1, round(sample_dt / dt_estimate(scene)))
     options = {"device": device} if backend == "vulkan" and device is not None else {}
@@ -231,7 +233,6 @@ def stop(info, out_dir=None, reached=""):
     """The exception that ends a validation run that stopped early, once it wrote its samples (to `reached`,
     e.g. "t = 1.2 s", in out_dir where given): Interrupted where a signal stopped it (the shell's status is
     then 128 + the signal), else SimulationError."""
-    from sphcore.simulation import SimulationError
     message = info["error"] + (f"; the samples to {reached} are in {out_dir}" if out_dir is not None else "")
     return Interrupted(info["signal"], message) if info.get("signal") else SimulationError(message)
 
@@ -261,8 +262,8 @@ def rms_against(t_sim, p_sim, t_exp, p_exp, until=RMS_UNTIL):
 
 
 def running_mean(t, values, width=SMOOTH_STAR):
-    from sphcore.validate.spheric import running_mean as mean
-    return mean(np.asarray(t, float), np.asarray(values, float), width)
+    """The mean of `values` over a window of about `width` (in t*) centred on each sample (sensors.running_mean)."""
+    return sensors.running_mean(np.asarray(t, float), np.asarray(values, float), width)
 
 
 def errors(t_star, p_star):

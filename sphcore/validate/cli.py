@@ -157,6 +157,8 @@ def add_physics_options(p):
                    "update (0 < omega <= 1)")
     p.add_argument("--cfl-number", type=positive(float), help="time.cfl_number: DFSPH's step, dt = cfl_number dx / "
                    "the fastest particle's speed (default 0.4, at most 1)")
+    p.add_argument("--shifting", choices=configs.choices("shifting"), help="physics.shifting (lind: Lind et al. "
+                   "2012's particle shifting, coefficient fluid.shifting)")
 
 
 def add_commands(sub):

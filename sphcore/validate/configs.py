@@ -2,8 +2,9 @@
 takes one by one.
 
 A configuration is a set of scene keys (dotted names) laid over the scene a validation case
-builds; "graphics" adds none (the model every scene gets by default today: Mueller's kernels,
-summation density, Mueller's laminar viscosity, free-slip mirror walls, symplectic Euler),
+builds over the graphics model (`physics.model = "graphics"`, which each case names); "graphics" adds
+none (Mueller's kernels, summation density, Mueller's laminar viscosity, free-slip mirror walls,
+symplectic Euler),
 "engineering" is the recommended model for measured figures (Wendland C2, continuity density
 with density diffusion, Monaghan's artificial viscosity, velocity Verlet), the configuration of
 TrixiParticles' 2D dam break (examples/fluid/dam_break_2d.jl: Wendland C2 with smoothing length
@@ -34,6 +35,7 @@ SWITCHES = {
     "pressure_solver": ("physics.pressure_solver", ("state_equation", "dfsph")),  # issue 14
     "relaxation": ("fluid.relaxation", None),  # DFSPH's omega
     "cfl_number": ("time.cfl_number", None),  # DFSPH's step: the CFL number on the particle speed
+    "shifting": ("physics.shifting", ("none", "lind")),  # issue 31: Lind et al. 2012's particle shifting
 }
 OPTIONS = (*SWITCHES, "adaptive_dt")  # the settings a case takes beside "config"
 ALPHA_KEY = "fluid.alpha"  # Monaghan's alpha of the artificial viscosity model
@@ -71,6 +73,9 @@ CONFIGS = {
     # the recommended model with summation density (no continuity, no diffusion)
     "engineering_summation": {k: v for k, v in ENGINEERING.items() if k not in (
         "physics.density", "physics.density_diffusion", "fluid.density_diffusion")},
+    # issue 31: the recommended model with Lind et al. 2012's particle shifting (A = 2, DualSPHysics' ShiftCoef;
+    # docs/models/shifting.md)
+    "engineering_shifting": {**ENGINEERING, "physics.shifting": "lind", "fluid.shifting": 2.0},
 }
 DEFAULT_CONFIG = "graphics"
 RECOMMENDED_CONFIG = "engineering"

@@ -25,9 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from tqdm import tqdm
+
+from sphcore.errors import Interrupted, SimulationError
 from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError
+from sphcore.signals import Signals
 from sphcore.validate import DATA_DIR, configs
+from sphcore.validate.buchner import advance, dt_estimate, stop
 
 G = 9.81
 TANK_LENGTH = 8.0  # in units of a
@@ -95,7 +100,7 @@ def dam_break_scene(settings):
         gravity = gravity + [0.0]
     return Scene.from_dict(configs.apply({
         "name": f"dam_break_{dim}d",
-        "physics": {"dimension": dim, "equation_of_state": s["equation_of_state"],
+        "physics": {"model": "graphics", "dimension": dim, "equation_of_state": s["equation_of_state"],
                     "neighbour_search": s["neighbour_search"], "precision": s["precision"]},
         "domain": {"box_min": lo, "box_max": hi},
         "fluid": {"blocks": [block], "spacing": dx, "smoothing_ratio": s["smoothing_ratio"],
@@ -155,16 +160,10 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
     column_height, T, Z, tau, H). Writes dam_break_<dim>d.csv and summary JSON to out_dir if given; a run
     that blows up or is interrupted (SIGINT, SIGTERM) writes the samples it has (the summary names the
     error), then raises SimulationError or Interrupted (buchner.stop)."""
-    from tqdm import tqdm
-
-    from sphcore.signals import Interrupted, Signals
-    from sphcore.simulation import Simulation, SimulationError
-    from sphcore.validate.buchner import advance, stop
+    from sphcore.simulation import Simulation  # (numba: loaded where a run starts)
 
     s = {**SETTINGS, **(settings or {})}
     scene = dam_break_scene(s)
-    from sphcore.validate.buchner import dt_estimate
-
     a, dt = s["a"], dt_estimate(scene)
     every = max(1, round(SAMPLE_DT / math.sqrt(2 * G / a) / dt))
     steps = math.ceil(s["t_end"] / dt)
@@ -197,7 +196,7 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
                "min_neighbours": k_min, "error": error, "signal": signum, **errors(rows, s)}
     t_run = rows[-1]["t"]
     summary.update(mean_dt=t_run / max(sim.step_count, 1), wall_per_simulated_s=wall / t_run if t_run > 0 else None)
-    if scene.dfsph:  # issue 14: iterations per step and the errors reached (sphcore.pressure_solver's log)
+    if scene.dfsph:  # issue 14: iterations per step and the errors reached (sphcore.solvers.dfsph's log)
         log = sim.solver_log.array()
         summary["dfsph"] = {"divergence_iterations_mean": float(log[:, 3].mean()),
                             "density_iterations_mean": float(log[:, 5].mean()),

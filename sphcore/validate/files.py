@@ -7,15 +7,11 @@ import io
 import json
 from pathlib import Path
 
-from sphcore.scene import SceneError
+from sphcore.errors import ResultsError
 
 JSON_NAMES = {dict: "an object", list: "an array"}
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 PNG_END = b"IEND\xaeB`\x82"  # the last chunk of every PNG: its absence means a truncated file
-
-
-class ResultsError(SceneError):
-    """A results file that cannot be used; the message names it and says what is wrong with it (`why`)."""
 
 
 def unreadable(path, why):

@@ -68,3 +68,13 @@ def wall_pressure(x, p, point, h, box_min, box_max):
 def wall_pressures(x, p, points, h, box_min, box_max):
     """{name: pressure} of the sensors `points` {name: point}."""
     return {name: wall_pressure(x, p, s, h, box_min, box_max) for name, s in points.items()}
+
+
+def running_mean(t, values, width):
+    """The mean of `values` over a window of about `width` centred on each sample (as many samples
+    either side, fewer at the ends), for samples about evenly spaced in time `t`."""
+    half = max(0, int(round(width / np.median(np.diff(t)) / 2))) if len(t) > 1 else 0
+    cumulative = np.concatenate([[0.0], np.cumsum(values)])
+    k = np.arange(len(t))
+    lo, hi = np.maximum(k - half, 0), np.minimum(k + half + 1, len(t))
+    return (cumulative[hi] - cumulative[lo]) / (hi - lo)

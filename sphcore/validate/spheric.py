@@ -57,8 +57,13 @@ from pathlib import Path
 
 import numpy as np
 
+from tqdm import tqdm
+
+from sphcore.errors import Interrupted, SimulationError
 from sphcore.scene import Scene
-from sphcore.validate import DATA_DIR, configs
+from sphcore.signals import Signals
+from sphcore.validate import DATA_DIR, configs, sensors
+from sphcore.validate.buchner import advance, dt_estimate, stop
 from sphcore.validate.files import read_csv, read_json
 
 G = 9.81
@@ -102,7 +107,7 @@ def spheric_scene(settings=None):
     viscosity = s["alpha"] * 1000.0 * math.sqrt(s["stiffness"]) * h / 10.0
     return Scene.from_dict(configs.apply({
         "name": "spheric_test2",
-        "physics": {"dimension": 3, "equation_of_state": "tait", "precision": s["precision"]},
+        "physics": {"model": "graphics", "dimension": 3, "equation_of_state": "tait", "precision": s["precision"]},
         "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": list(TANK),
                    "obstacles": [{"min": list(BOX_MIN), "max": list(BOX_MAX)}]},
         "fluid": {"blocks": [{"min": [TANK[0] - n[0] * dx, 0.0, 0.0], "max": [TANK[0], n[1] * dx, min(n[2] * dx, TANK[2])]}],
@@ -140,13 +145,8 @@ def read_experiment():
 
 
 def running_mean(t, values, width=SMOOTH_S):
-    """The mean of `values` over a window of about `width` centred on each sample (as many samples
-    either side, fewer at the ends), for samples about evenly spaced in time `t`."""
-    half = max(0, int(round(width / np.median(np.diff(t)) / 2))) if len(t) > 1 else 0
-    cumulative = np.concatenate([[0.0], np.cumsum(values)])
-    k = np.arange(len(t))
-    lo, hi = np.maximum(k - half, 0), np.minimum(k + half + 1, len(t))
-    return (cumulative[hi] - cumulative[lo]) / (hi - lo)
+    """The mean of `values` over a window of about `width` [s] centred on each sample (sensors.running_mean)."""
+    return sensors.running_mean(t, values, width)
 
 
 def errors(rows):
@@ -171,16 +171,10 @@ def run_spheric(settings=None, out_dir=None, progress=True):
     Writes spheric_test2.csv and spheric_test2.json to out_dir if given; a run that blows up or is
     interrupted (SIGINT, SIGTERM) writes the samples it has (the summary names the error), then raises
     SimulationError or Interrupted (buchner.stop)."""
-    from tqdm import tqdm
-
-    from sphcore.signals import Interrupted, Signals
-    from sphcore.simulation import Simulation, SimulationError
-    from sphcore.validate.buchner import advance, stop
+    from sphcore.simulation import Simulation  # (numba: loaded where a run starts)
 
     s = {**SETTINGS, **(settings or {})}
     scene = spheric_scene(s)
-    from sphcore.validate.buchner import dt_estimate
-
     dt, dx, h = dt_estimate(scene), scene["fluid.spacing"], scene.h
     every = max(1, round(SAMPLE_DT / dt))
     steps = math.ceil(s["t_end"] / dt)

@@ -25,7 +25,7 @@ MAX_STEPS = 1500  # or this many steps, where the time step is small
 
 def scene(name, physics=None, fluid=None, time=None, gravity=None, blocks=COLUMN):
     return Scene.from_dict({
-        "name": name, "physics": physics or {}, "domain": BOX,
+        "name": name, "physics": {"model": "graphics", **(physics or {})}, "domain": BOX,
         "fluid": {"blocks": blocks, "spacing": 0.02, "stiffness": 400.0, "viscosity": 1.0, **(fluid or {})},
         "forces": {"gravity": gravity or [0.0, -9.81]},
         "time": {"dt": "auto", "steps": 1, "output_every": 100, "checkpoint_every": 1000, **(time or {})},
@@ -118,7 +118,7 @@ def largest_scene(count, precision="float32"):
     dx = 0.01
     edge = side * dx
     return Scene.from_dict({
-        "name": "largest_count", "physics": {"dimension": 3, "precision": precision},
+        "name": "largest_count", "physics": {"model": "graphics", "dimension": 3, "precision": precision},
         "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [1.5 * edge, 1.5 * edge, 1.5 * edge]},
         "fluid": {"blocks": [{"min": [0.0, 0.0, 0.0], "max": [edge + 1e-9, edge + 1e-9, edge + 1e-9]}],
                   "spacing": dx, "stiffness": 400.0, "viscosity": 1.0},

@@ -29,9 +29,8 @@ import threading
 import time
 from pathlib import Path
 
+from sphcore.errors import Interrupted, SweepError
 from sphcore.output import atomic_savefig, atomic_write_bytes
-from sphcore.signals import Interrupted
-from sphcore.simulation import SimulationError
 from sphcore.validate.configs import CONFIGS, RECOMMENDED_CONFIG
 from sphcore.validate.dam_break import SETTINGS
 from sphcore.validate.files import check, read_json, unreadable
@@ -49,10 +48,6 @@ RESULT_COLUMNS = (["status", "error", "dtype", "device", "host", "particles", "s
                    "best_shift_T_table2", "points_table2"] + [f"rms_Z_{s}" for s in SERIES[1:]])
 COLUMNS = ["point", "varied", *POINT_KEYS, *RESULT_COLUMNS]
 QUICK_T_END = 0.1  # s: T = 0.9, the first three points of Table 2
-
-
-class SweepError(SimulationError):
-    """A sweep that cannot start (no scheduler at the address, a bad option)."""
 
 
 def at(**changes):

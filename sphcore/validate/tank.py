@@ -62,7 +62,8 @@ def tank_scene(settings=None):
     h = s["smoothing_ratio"] * dx
     data = {
         "name": "hydrostatic_tank",
-        "physics": {"dimension": 2, "equation_of_state": s["equation_of_state"], "precision": s["precision"]},
+        "physics": {"model": "graphics", "dimension": 2, "equation_of_state": s["equation_of_state"],
+                    "precision": s["precision"]},  # the configuration's keys are laid over the graphics model
         "domain": {"box_min": [0.0, 0.0], "box_max": [WIDTH, TANK_HEIGHT]},
         "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [WIDTH, DEPTH]}], "spacing": dx,
                   "smoothing_ratio": s["smoothing_ratio"], "stiffness": c * c,

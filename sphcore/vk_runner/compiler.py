@@ -18,10 +18,7 @@ import tempfile
 from pathlib import Path
 
 from sphcore import cache_trust, paths
-
-
-class ShaderCompileError(RuntimeError):
-    """No compiler, or the compiler rejected a shader (its message names file and line)."""
+from sphcore.errors import ShaderCompileError
 
 
 INSTALL_HINT = ("no GLSL compiler found: install glslangValidator or glslc "

@@ -9,6 +9,8 @@ import sys
 
 import numpy as np
 
+from sphcore.errors import VulkanError
+
 WHOLE_SIZE = 0xFFFFFFFFFFFFFFFF
 FENCE_TIMEOUT_NS = 3600 * 10**9
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
@@ -21,10 +23,6 @@ STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for small 
 # after the previous 30 had been destroyed. Contexts share it and create their own device.
 _INSTANCES = {}
 _CALLBACKS = []  # the debug callbacks must outlive the instance
-
-
-class VulkanError(RuntimeError):
-    """A Vulkan failure, with what to do about it in the message."""
 
 
 def load_vulkan():
@@ -50,13 +48,16 @@ DEVICE_TYPE_RANK = ("DISCRETE_GPU", "INTEGRATED_GPU", "VIRTUAL_GPU", "CPU", "OTH
 
 
 class Buffer:
-    """A storage buffer in device-local memory; host-mapped where that memory is host-visible."""
+    """A storage buffer in device-local memory (`uniform`: a uniform buffer); host-mapped where that
+    memory is host-visible."""
 
-    def __init__(self, ctx, nbytes, name):
+    def __init__(self, ctx, nbytes, name, uniform=False):
         vk = ctx.vk
         self.ctx, self.nbytes, self.name = ctx, max(int(nbytes), 4), name
         usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
                  | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT | vk.VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT)
+        if uniform:
+            usage = vk.VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT
         if ctx.conditional_rendering:
             usage |= vk.VK_BUFFER_USAGE_CONDITIONAL_RENDERING_BIT_EXT
         self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, name)
@@ -105,18 +106,24 @@ class _Staging(Buffer):
 
 
 class Pipeline:
-    """A compute pipeline over `n_bindings` storage buffers with one push-constant range."""
+    """A compute pipeline over `n_bindings` storage buffers (bindings 0, 1, ...), a uniform buffer at
+    `uniform_binding` if given, and one push-constant range."""
 
-    def __init__(self, ctx, spirv, n_bindings, push_size, local_size, spec_values=()):
+    def __init__(self, ctx, spirv, n_bindings, push_size, local_size, spec_values=(), uniform_binding=None):
         vk = ctx.vk
         self.ctx, self.local_size, self.push_size = ctx, local_size, push_size
-        self.spec_values = list(spec_values)
+        self.spec_values, self.uniform_binding = list(spec_values), uniform_binding
+        if uniform_binding is not None and uniform_binding < n_bindings:
+            raise ValueError(f"uniform binding {uniform_binding} is among the {n_bindings} storage buffers' bindings")
         bindings = [vk.VkDescriptorSetLayoutBinding(
             binding=b, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=1,
             stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT) for b in range(n_bindings)]
+        uniforms = [] if uniform_binding is None else [vk.VkDescriptorSetLayoutBinding(
+            binding=uniform_binding, descriptorType=vk.VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, descriptorCount=1,
+            stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT)]
         self.set_layout = vk.vkCreateDescriptorSetLayout(ctx.device, vk.VkDescriptorSetLayoutCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
-            bindingCount=n_bindings, pBindings=bindings), None)
+            bindingCount=len(bindings + uniforms), pBindings=bindings + uniforms), None)
         ranges = [vk.VkPushConstantRange(stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT, offset=0, size=push_size)]
         self.layout = vk.vkCreatePipelineLayout(ctx.device, vk.VkPipelineLayoutCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO, setLayoutCount=1,
@@ -136,22 +143,27 @@ class Pipeline:
         self.pipeline = vk.vkCreateComputePipelines(ctx.device, None, 1, [vk.VkComputePipelineCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO, stage=stage, layout=self.layout)], None)[0]
         vk.vkDestroyShaderModule(ctx.device, module, None)
-        pool_size = vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=n_bindings)
+        pool_sizes = [vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=n_bindings)]
+        if uniform_binding is not None:
+            pool_sizes.append(vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, descriptorCount=1))
         self.pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
-            sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, maxSets=1, poolSizeCount=1,
-            pPoolSizes=[pool_size]), None)
+            sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, maxSets=1, poolSizeCount=len(pool_sizes),
+            pPoolSizes=pool_sizes), None)
         self.descriptor_set = vk.vkAllocateDescriptorSets(ctx.device, vk.VkDescriptorSetAllocateInfo(
             sType=vk.VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO, descriptorPool=self.pool,
             descriptorSetCount=1, pSetLayouts=[self.set_layout]))[0]
 
-    def bind(self, buffers):
-        """Bind `buffers` to bindings 0, 1, ... of the descriptor set."""
+    def bind(self, buffers, uniform=None):
+        """Bind `buffers` to bindings 0, 1, ... of the descriptor set, and `uniform` to the uniform binding."""
         vk = self.ctx.vk
+        kinds = [(b, buf, vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER) for b, buf in enumerate(buffers)]
+        if uniform is not None:
+            kinds.append((self.uniform_binding, uniform, vk.VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER))
         writes = [vk.VkWriteDescriptorSet(
             sType=vk.VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, dstSet=self.descriptor_set, dstBinding=b,
-            dstArrayElement=0, descriptorCount=1, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+            dstArrayElement=0, descriptorCount=1, descriptorType=kind,
             pBufferInfo=[vk.VkDescriptorBufferInfo(buffer=buf.buffer, offset=0, range=WHOLE_SIZE)])
-            for b, buf in enumerate(buffers)]
+            for b, buf, kind in kinds]
         vk.vkUpdateDescriptorSets(self.ctx.device, len(writes), writes, 0, None)
 
     def free(self):
@@ -543,11 +555,11 @@ class Context:
         rec.free()
 
     # ---- public ----
-    def buffer(self, nbytes, name="buffer"):
-        return Buffer(self, nbytes, name)
+    def buffer(self, nbytes, name="buffer", uniform=False):
+        return Buffer(self, nbytes, name, uniform)
 
-    def pipeline(self, spirv, n_bindings, push_size, local_size=128, spec_values=()):
-        return Pipeline(self, spirv, n_bindings, push_size, local_size, spec_values)
+    def pipeline(self, spirv, n_bindings, push_size, local_size=128, spec_values=(), uniform_binding=None):
+        return Pipeline(self, spirv, n_bindings, push_size, local_size, spec_values, uniform_binding)
 
     def record(self, secondary=False):
         return Recording(self, secondary)

@@ -1,5 +1,6 @@
 """DFSPH on the host (physics.pressure_solver = "dfsph"): its settings into the state, its per-step
-log out of the device, and the report of a solve that did not converge.
+log out of the device, and the report of a solve that did not converge (the solver's side of the
+stepper: sphcore/solvers/state_equation.py).
 
 The solve itself runs on the device with no readback (shaders/sph/dfsph.glsl describes how its loop
 stops there). Each step's iteration counts and final errors land in a ring of
@@ -10,19 +11,17 @@ import warnings
 
 import numpy as np
 
-from sphcore.simulation import SimulationError
+from sphcore.errors import ConvergenceWarning, SimulationError
+from sphcore.solvers.state_equation import StateEquation
 from sphcore.sph.dfsph import (CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES, CONTROL_MAX_ITERATIONS,
                                CONTROL_OVERFLOW_STEP, CONTROL_RUNNING, HISTORY_ROWS, SOLVE_DENSITY, SOLVE_DIVERGENCE,
-                               STATE_FAILED_ERROR, STATE_RELAXATION, STATE_TOLERANCE)
+                               SOLVE_WARM_START, STATE_FAILED_ERROR, STATE_RELAXATION, STATE_TOLERANCE)
+from sphcore.stage import Stage
 
 LOG_COLUMNS = ("step", "dt", "time", "divergence_iterations", "divergence_error", "density_iterations",
                "density_error", "converged")
 SOLVES = {SOLVE_DIVERGENCE: ("divergence-free", "fluid.max_divergence_error"),
           SOLVE_DENSITY: ("constant-density", "fluid.max_density_error")}
-
-
-class ConvergenceWarning(UserWarning):
-    """A DFSPH solve spent fluid.max_iterations updates without reaching its tolerance."""
 
 
 def init_state(state, scene):
@@ -38,6 +37,57 @@ def init_state(state, scene):
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DIVERGENCE] = scene["fluid.max_divergence_error"]
     state["dfsph_state"][STATE_TOLERANCE + SOLVE_DENSITY] = scene["fluid.max_density_error"]
     state["dfsph_state"][STATE_RELAXATION] = scene["fluid.relaxation"]
+
+
+class DFSPH(StateEquation):
+    """DFSPH's side of the stepper: its settings, its log (`log`, a SolverLog), read every HISTORY_ROWS steps
+    at most, in checkpoints and final.npz, and a diverged solve as a blow-up's cause."""
+
+    carried = ("dfsph_state", "particle_kappa")  # its tolerances and errors, and its warm start (control is generic)
+    collect_every = HISTORY_ROWS
+
+    def __init__(self, scene):
+        super().__init__(scene)
+        self.log = SolverLog(scene)  # each step's iterations and errors (final.npz: solver_log)
+
+    def stages_before_forces(self):
+        """The factor, then the divergence-free solve (dfsph.glsl)."""
+        return [Stage("dfsph_factor")] + dfsph_solve(SOLVE_DIVERGENCE, self.scene["fluid.max_iterations"])
+
+    def stages_after_dt(self):
+        """The constant-density solve once the step's dt is known: v* = v + dt a, the warm start where the first
+        residual finds compression, as SPlisHSPlasH's; then the solve."""
+        return [Stage("dfsph_predict"), Stage("dfsph_residual", SOLVE_DENSITY), Stage("dfsph_velocity", SOLVE_WARM_START)
+                ] + dfsph_solve(SOLVE_DENSITY, self.scene["fluid.max_iterations"])
+
+    def init_state(self, state):
+        init_state(state, self.scene)
+
+    def collect(self, backend, first, last):
+        self.log.collect(backend, first, last)
+
+    def restore(self, arrays, step):
+        if "solver_log" in arrays:  # (a replay's restore keeps the rows it has)
+            self.log.rows = {int(r[0]): np.array(r, np.float64) for r in arrays["solver_log"] if 0 < r[0] <= step}
+            self.log.reported = int(arrays["buffer_control"][CONTROL_FAILURES])  # reported then
+
+    def blow_up_cause(self):
+        return self.log.diverged()
+
+    def checkpoint_arrays(self):
+        return {"solver_log": self.log.array()}  # each step's iterations and errors so far: a resumed run's is whole
+
+    def final_arrays(self):
+        return {"solver_log": self.log.array(), "solver_log_columns": np.array(LOG_COLUMNS)}
+
+
+def dfsph_solve(solve, iterations):
+    """One DFSPH solve as recorded: the residual (whose last work group runs the convergence check), then
+    `iterations` times an update and the residual, dispatched indirectly. Once a check stops the solve, it
+    zeroes their group counts: the loop ends on the device, with no readback, and both backends run the
+    same updates."""
+    return [Stage("dfsph_residual", solve)] + [Stage(name, solve, True) for name in ("dfsph_velocity",
+                                                                                  "dfsph_residual")] * iterations
 
 
 class SolverLog:

@@ -1,0 +1,124 @@
+"""The health checks of a run's state (sphcore.simulation.Simulation.read runs them): finite values,
+particles inside the box, the grid's counts, and an energy that does not grow. A failed check raises
+SimulationError naming the step, the particle and the likely cause.
+"""
+import math
+
+import numpy as np
+
+from sphcore.errors import SimulationError
+from sphcore.scene import stable_dt
+
+
+def energy_terms(scene, state):
+    """(kinetic + potential from box_min, internal energy of the equation of state) [J; 2D: J/m].
+    Nothing in the physics adds energy (walls and viscosity only take it away), so a run
+    whose energy grows is blowing up. Internal energy: the integral of p / rho^2 d rho, from
+    the densities of the last step (computed from the positions before it) or of the start."""
+    x, v = state["particle_x"].astype(np.float64), state["particle_v"].astype(np.float64)
+    rho = state["particle_rho"].astype(np.float64)
+    rho0, k = scene["fluid.rest_density"], scene["fluid.stiffness"]
+    r = rho / rho0
+    if scene["physics.density"] == "summation":
+        r = np.maximum(r, 1.0)  # the pressure is clamped at 0 below rest density (not with continuity)
+    if scene["physics.equation_of_state"] == "tait":
+        internal = k / 7.0 * ((r ** 6 - 1.0) / 6.0 + 1.0 / r - 1.0)
+    else:
+        internal = k * (np.log(r) + 1.0 / r - 1.0)
+    g = np.asarray(scene["forces.gravity"]) if scene["physics.gravity"] else np.zeros(scene.dim)
+    potential = -(x - np.asarray(scene["domain.box_min"])) @ g
+    return float(scene.mass * (0.5 * (v * v).sum(axis=1) + potential).sum()), float(scene.mass * internal.sum())
+
+
+def check_grid(sim, status):
+    """Raise SimulationError if the grid saw a particle outside its range, or lost count of one."""
+    steps = f"between steps {sim.checked_step} and {sim.step_count}"
+    if status[0]:
+        where = ("outside the box" if sim.scene["domain.boundary"] == "walls"
+                 else f"beyond the hashed range (+-2^24 cells of {sim.scene.h:g} m)")
+        raise SimulationError(f"{steps}: {int(status[0])} particle position(s) were {where} or not finite "
+                              f"(the first: particle {int(status[1])}); likely cause: a blow-up "
+                              f"(dt = {sim.scene.dt:g} s, estimated bound {stable_dt(sim.scene)[0]:.3g} s)")
+    if status[2]:
+        raise SimulationError(f"{steps}: the neighbour grid counted a different number of particles than "
+                              f"{sim.n} in {int(status[2])} steps (a counter overflow): please report this")
+
+
+def check_state(sim, state):
+    """Raise SimulationError at the first particle with a non-finite value or outside the box."""
+    for name, values in state.items():
+        bad = ~np.isfinite(values.reshape(sim.n, -1)).all(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            dt_max, bound = stable_dt(sim.scene)
+            dt = sim.scene.dt
+            cause = (f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s" if dt > dt_max else
+                     f"time.dt = {dt:g} s is within the estimated bound {dt_max:.3g} s ({bound}); "
+                     "look for stiffness or viscosity at the ends of their ranges")
+            cause = sim.solver.blow_up_cause() or cause
+            raise SimulationError(f"blow-up at step {sim.step_count} (t = {sim.time:.6g} s): {name} of "
+                                  f"particle {i} is {values[i]} ({int(bad.sum())} particles non-finite); "
+                                  f"likely cause: {cause}")
+    check_energy(sim, state)
+    if sim.scene["domain.boundary"] == "open":
+        return
+    x = state["particle_x"]
+    # the walls as the shaders see them (float32): a particle clamped onto a wall sits exactly there
+    lo = np.asarray(sim.scene["domain.box_min"], np.float32)
+    hi = np.asarray(sim.scene["domain.box_max"], np.float32)
+    outside = ((x < lo) | (x > hi)).any(axis=1)
+    if outside.any():
+        i = int(np.argmax(outside))
+        raise SimulationError(f"step {sim.step_count}: particle {i} at {x[i]} left the box {lo} .. {hi}")
+
+
+def check_energy(sim, state):
+    """Raise SimulationError if the energy grew past its start by 10 % (plus, per particle, the
+    potential energy of a fall of h / 4 and the kinetic energy of 1 % of the sound
+    speed), or a particle outruns twice the sound speed plus the free-fall speed (an explosion).
+    The free-fall speed: from the top of the fluid to the floor, and in an open domain, where
+    nothing stops a fall, also |g| t. The message says which of the two failed, with its figures."""
+    scene = sim.scene
+    if sim.energy_start is None or scene["physics.surface_tension"]:  # cohesion's energy is not counted
+        return
+    c = math.sqrt(scene["fluid.stiffness"])
+    g = math.sqrt(sum(a * a for a in scene["forces.gravity"])) if scene["physics.gravity"] else 0.0
+    allowed = (sim.energy_start + 0.1 * abs(sim.energy_start)
+               + sim.n * scene.mass * (g * scene.h / 4 + 0.5 * (0.01 * c) ** 2))
+    speed = np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1))
+    fall = scene.speed_estimate() + (g * sim.time if scene["domain.boundary"] == "open" else 0.0)
+    limit = 2.0 * (c + fall)
+    energy = sum(energy_terms(scene, state))
+    if energy <= allowed and speed.max() <= limit:
+        return
+    i = int(np.argmax(speed))
+    went = "rose" if energy > sim.energy_start else "fell"
+    if energy > allowed:
+        what = (f"the energy rose from {sim.energy_start:.4g} J to {energy:.4g} J, past the {allowed:.4g} J "
+                f"allowed, and particle {i} moves at {speed[i]:.3g} m/s (sound speed {c:.3g} m/s)")
+    else:
+        what = (f"particle {i} moves at {speed[i]:.3g} m/s, past the {limit:.3g} m/s allowed (twice the sound "
+                f"speed {c:.3g} m/s plus the free-fall speed {fall:.3g} m/s), while the energy {went} from "
+                f"{sim.energy_start:.4g} J to {energy:.4g} J")
+    dt_max, bound = stable_dt(scene, scene.speed_estimate())
+    dt = scene.dt
+    lo, hi = np.asarray(scene["domain.box_min"]), np.asarray(scene["domain.box_max"])
+    gap = min((state["particle_x"][i] - lo).min(), (hi - state["particle_x"][i]).min())
+    if dt > dt_max:
+        cause = f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s"
+    elif not (scene["physics.viscosity"] and scene.shear_viscosity > 0):
+        coefficient = "fluid.alpha" if scene["physics.viscosity_model"] == "artificial" else "fluid.viscosity"
+        cause = f"no viscosity: nothing damps the particles' noise (raise {coefficient})"
+    elif scene["domain.boundary"] == "walls" and gap < scene["fluid.spacing"] / 2:
+        cause = (f"particle {i} is {gap:.3g} m from a wall, closer than half a spacing, where its mirror images "
+                 "(the walls' ghost particles) push it; a particle that starts on a wall is pushed by images "
+                 "that coincide with it: start the fluid at least fluid.spacing / 2 inside the box")
+    elif energy > allowed:
+        lower = "time.dt_fraction" if scene["time.dt"] == "auto" else "time.dt"
+        cause = (f"dt = {dt:g} s is within the estimated {bound} bound {dt_max:.3g} s, yet the state gains "
+                 f"energy: lower {lower} (a stiff fluid needs a fraction of the CFL bound)")
+    else:
+        cause = (f"one particle flung without the energy growing (dt = {dt:g} s is within the estimated {bound} "
+                 f"bound {dt_max:.3g} s): a pair too close, or a force that is not the physics'; please report it")
+    raise SimulationError(f"blow-up at step {sim.step_count} (t = {sim.time:.6g} s): {what}; "
+                          f"likely cause: {cause}")
