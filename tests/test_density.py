@@ -20,7 +20,8 @@ def kernel_functions(kernel, dim, h):
     """(W(r), grad W(r) . r_hat, L(r)) of kernels.glsl's mirror in float64, coefficients folded as the host does."""
     P = np.zeros(1, PARAMS_DTYPE)
     P[0]["h"], P[0]["h2"] = h, h * h
-    kernel_w, kernel_gradient, _, kernel_laplacian = kernels(Spec(DIM=dim, KERNEL=KERNELS.index(kernel)), np.float64)
+    helpers = kernels(Spec(DIM=dim, KERNEL=KERNELS.index(kernel)), np.float64)
+    kernel_w, kernel_gradient, kernel_laplacian = helpers.kernel_w, helpers.kernel_gradient, helpers.kernel_laplacian
     c = kernel_coefficients(h, dim, kernel)
     h32 = float(np.float32(h))  # the parameter block is float32: the helpers see h rounded
     rec = P[0]
@@ -76,7 +77,7 @@ def test_wendland_lattice_sums_to_rest_density():
     scene3 = Scene.from_dict({"physics": {"model": "graphics", "dimension": 3, "kernel": "wendland_c2"},
                               "fluid": {"blocks": [{"min": [0.0] * 3, "max": [0.2] * 3}], "spacing": 0.04}})
     params = scene3.params(1)
-    kernel_w = kernels(scene3.spec, np.float32)[0]
+    kernel_w = kernels(scene3.spec, np.float32).kernel_w
     k = np.arange(-2, 3) * 0.04
     r2 = (sum(np.meshgrid(k ** 2, k ** 2, k ** 2, indexing="ij"))).ravel().astype(np.float32)
     total = np.float32(0.0)

@@ -23,7 +23,11 @@ f32 = np.float32
 @lru_cache(maxsize=None)
 def sample_field(spec):
     WALLS = spec.WALLS
-    cell_of, _, near_walls, reflected, range_count, range_cells = cells(spec)
+    cell_of = cells(spec).cell_of
+    near_walls = cells(spec).near_walls
+    reflected = cells(spec).reflected
+    range_count = cells(spec).range_count
+    range_cells = cells(spec).range_cells
 
     @njit
     def sample_field_main(i, params, volume, particle_x, particle_rho, cell_pyramid, cell_start):

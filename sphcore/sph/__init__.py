@@ -7,3 +7,10 @@ of the shader is the same type here. Parameter-block fields stay float32 on both
 promote to float64 where they meet a float64 value, as GLSL converts float to double.
 Stages on integers only (the grid sort) accept `real` and ignore it.
 """
+from collections import namedtuple
+
+
+def named(*functions):
+    """An include's helpers, returned by its factory: a tuple whose fields are the functions' names, so that a
+    stage takes each by name (`cells(spec, real).near_walls`), never by its place."""
+    return namedtuple("Helpers", [f.__name__ for f in functions])(*functions)

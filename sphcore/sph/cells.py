@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from sphcore.sph import named
 
 CELL_LIMIT = 1 << 24  # |cell coordinate| beyond this: outside the hashed range
 
@@ -44,7 +45,7 @@ def skin(spec, real=np.float32):
     def moved_limit2(P):
         return real(P.h2) * (real(LIST_SKIN * LIST_SKIN) / real(4202500.0))
 
-    return near_walls_within, list_reach, moved_limit2
+    return named(near_walls_within, list_reach, moved_limit2)
 
 
 @lru_cache(maxsize=None)
@@ -78,7 +79,7 @@ def cells(spec, real=np.float32):
             c_z = (c_z + d_z * (CELL_LIMIT // d_z + 2)) % d_z
         return (c_z * d_y + c_y) * d_x + c_x
 
-    near_walls_within = skin(spec, real)[0]
+    near_walls_within = skin(spec, real).near_walls_within
 
     @njit
     def near_walls(P, x_x, x_y, x_z):
@@ -118,4 +119,4 @@ def cells(spec, real=np.float32):
         last = cell_index(P, c_last_x, c_y, c_z)
         return first >= 0, first, last
 
-    return cell_of, cell_index, near_walls, reflected, range_count, range_cells
+    return named(cell_of, cell_index, near_walls, reflected, range_count, range_cells)

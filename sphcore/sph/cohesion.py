@@ -15,7 +15,7 @@ from sphcore.sph.kernels import kernels
 
 @lru_cache(maxsize=None)
 def cohesion(spec, real=np.float32):
-    kernel_w = kernels(spec, real)[0]
+    kernel_w = kernels(spec, real).kernel_w
 
     @njit
     def cohesion_becker(P, r2, r_x, r_y, r_z):

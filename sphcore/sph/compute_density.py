@@ -45,11 +45,17 @@ def can_list_first(spec):
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
     GRID, NEIGHBOUR_STATS = spec.GRID, spec.NEIGHBOUR_STATS
-    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
-    near_walls_within, list_reach = skin(spec, real)[:2]
-    listed_distance = neighbour_list(spec, real)[2]
+    cell_of = cells(spec, real).cell_of
+    near_walls = cells(spec, real).near_walls
+    reflected = cells(spec, real).reflected
+    range_count = cells(spec, real).range_count
+    range_cells = cells(spec, real).range_cells
+    near_walls_within = skin(spec, real).near_walls_within
+    list_reach = skin(spec, real).list_reach
+    listed_distance = neighbour_list(spec, real).listed_distance
     LIST_SKIN = spec.LIST_SKIN
-    near_obstacles, solid = obstacles(spec, real)
+    near_obstacles = obstacles(spec, real).near_obstacles
+    solid = obstacles(spec, real).solid
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
@@ -64,9 +70,10 @@ def compute_density(spec, real=np.float32):
     # `chunk`: one 16-byte store where the GPU paid for four scattered ones (a list-first scan writes entry by entry).
     CHUNKED = spec.LIST_CHUNKS and not spec.LIST_BY_PARTICLE and not LIST_FIRST
     list_slot = list_slots(spec)
-    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_w = kernels(spec, real).kernel_w
+    pair_gradient = kernels(spec, real).pair_gradient
     pair_direction = pairs(real)
-    hydrostatic_density, diffusion_term = density_diffusion(spec, real)
+    diffusion_term = density_diffusion(spec, real).diffusion_term
     equation_of_state_ = equation_of_state(spec, real)
 
     @njit

@@ -32,17 +32,20 @@ from sphcore.workgroups import launcher
 def compute_forces(spec, real=np.float32):
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
     DFSPH, SHIFTING = spec.DFSPH, spec.SHIFTING
-    near_walls = cells(spec, real)[2]
-    near_walls_within, list_reach = skin(spec, real)[:2]
+    near_walls = cells(spec, real).near_walls
+    near_walls_within = skin(spec, real).near_walls_within
+    list_reach = skin(spec, real).list_reach
     LIST_SKIN = spec.LIST_SKIN
-    near_obstacles = obstacles(spec, real)[0]
-    image_velocity = walls(spec, real)[2]
-    viscous_term, viscous_acceleration = viscosity(spec, real)[2:]
-    pair_gradient, kernel_laplacian = kernels(spec, real)[2:]
+    near_obstacles = obstacles(spec, real).near_obstacles
+    image_velocity = walls(spec, real).image_velocity
+    viscous_term = viscosity(spec, real).viscous_term
+    viscous_acceleration = viscosity(spec, real).viscous_acceleration
+    pair_gradient = kernels(spec, real).pair_gradient
+    kernel_laplacian = kernels(spec, real).kernel_laplacian
     pressure_monaghan = pressure(real)
     pair_direction = pairs(real)
     cohesion_becker = cohesion(spec, real)
-    shifting_lind = shifting(spec, real)[0]
+    shifting_lind = shifting(spec, real).shifting_lind
 
     @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
     def pair(own, state, i, j, image, r_x, r_y, r_z, r2, inward_x, inward_y, inward_z):

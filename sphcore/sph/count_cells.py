@@ -17,7 +17,8 @@ from sphcore.workgroups import launcher
 @lru_cache(maxsize=None)
 def count_cells(spec, real=np.float32):
     WALLS = spec.WALLS
-    cell_of, cell_index, _, _, _, _ = cells(spec, real)
+    cell_of = cells(spec, real).cell_of
+    cell_index = cells(spec, real).cell_index
 
     @njit
     def count_cells_main(i, params, particle_x, particle_id, particle_cell, particle_slot, cell_pyramid,

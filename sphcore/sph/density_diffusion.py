@@ -10,13 +10,14 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph import named
 from sphcore.sph.kernels import kernels
 
 
 @lru_cache(maxsize=None)
 def density_diffusion(spec, real=np.float32):
     DENSITY_DIFFUSION = spec.DENSITY_DIFFUSION
-    kernel_w, kernel_gradient, pair_gradient, kernel_laplacian = kernels(spec, real)
+    kernel_gradient = kernels(spec, real).kernel_gradient
 
     @njit
     def hydrostatic_density(P, x_ji_x, x_ji_y, x_ji_z):
@@ -31,4 +32,4 @@ def density_diffusion(spec, real=np.float32):
         rho_ji = rhoj - rhoi - hydrostatic_density(P, x_ji_x, x_ji_y, x_ji_z)
         return rho_ji / rhoj * kernel_gradient(P, r2, rlen) * rlen / (r2 + real(0.01) * P.h2)
 
-    return hydrostatic_density, diffusion_term
+    return named(hydrostatic_density, diffusion_term)

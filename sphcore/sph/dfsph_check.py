@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph import named
 from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_FAILED_SOLVE, CONTROL_FAILED_STEP, CONTROL_FAILURES,
                                CONTROL_ITERATIONS, CONTROL_MAX_ITERATIONS, CONTROL_RUNNING, CONTROL_STEP,
                                CONTROL_WINDOW, HISTORY_ROWS, MIN_ITERATIONS_DENSITY, MIN_ITERATIONS_DIVERGENCE,
@@ -83,4 +84,4 @@ def dfsph_check(spec, real=np.float32):
         dfsph_history[row, 7] = f32(1.0) if both else f32(0.0)
         control[CONTROL_STEP] = step
 
-    return dfsph_check_share, dfsph_check_decide
+    return named(dfsph_check_share, dfsph_check_decide)

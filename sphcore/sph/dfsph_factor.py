@@ -24,12 +24,12 @@ from sphcore.sph.obstacles import obstacles
 
 @lru_cache(maxsize=None)
 def dfsph_factor(spec, real=np.float32):
-    near_walls = cells(spec, real)[2]
-    near_obstacles = obstacles(spec, real)[0]
+    near_walls = cells(spec, real).near_walls
+    near_obstacles = obstacles(spec, real).near_obstacles
     MAX_NEIGHBOURS, GRADIENTS = spec.MAX_NEIGHBOURS, spec.GRADIENTS
     list_slot = list_slots(spec)
-    pair_gradient = kernels(spec, real)[2]
-    listed_pair = neighbour_list(spec, real)[0]
+    pair_gradient = kernels(spec, real).pair_gradient
+    listed_pair = neighbour_list(spec, real).listed_pair
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,

@@ -31,10 +31,11 @@ from sphcore.sph.obstacles import obstacles
 @lru_cache(maxsize=None)
 def dfsph_residual(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
-    near_walls = cells(spec, real)[2]
-    near_obstacles = obstacles(spec, real)[0]
-    listed_gradient = neighbour_list(spec, real)[1]
-    dfsph_check_share, dfsph_check_decide = dfsph_check(spec, real)
+    near_walls = cells(spec, real).near_walls
+    near_obstacles = obstacles(spec, real).near_obstacles
+    listed_gradient = neighbour_list(spec, real).listed_gradient
+    dfsph_check_share = dfsph_check(spec, real).dfsph_check_share
+    dfsph_check_decide = dfsph_check(spec, real).dfsph_check_decide
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box, time_state,

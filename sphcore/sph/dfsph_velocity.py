@@ -24,9 +24,9 @@ from sphcore.workgroups import launcher
 @lru_cache(maxsize=None)
 def dfsph_velocity(spec, real=np.float32):
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
-    near_walls = cells(spec, real)[2]
-    near_obstacles = obstacles(spec, real)[0]
-    listed_gradient = neighbour_list(spec, real)[1]
+    near_walls = cells(spec, real).near_walls
+    near_obstacles = obstacles(spec, real).near_obstacles
+    listed_gradient = neighbour_list(spec, real).listed_gradient
 
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,

@@ -24,11 +24,12 @@ from sphcore.workgroups import launcher
 def integrate(spec, real=np.float32):
     DIM, WALLS, OBSTACLES = spec.DIM, spec.WALLS, spec.OBSTACLES
     VERLET, ADAPTIVE_DT = spec.VERLET, spec.ADAPTIVE_DT
-    drift_velocity, stored_velocity = integrators(spec, real)[2:]
-    moved_limit2 = skin(spec, real)[2]
+    drift_velocity = integrators(spec, real).drift_velocity
+    stored_velocity = integrators(spec, real).stored_velocity
+    moved_limit2 = skin(spec, real).moved_limit2
     LIST_SKIN = spec.LIST_SKIN
     SHIFTING = spec.SHIFTING
-    shift_of = shifting(spec, real)[1]
+    shift_of = shifting(spec, real).shift_of
 
     @njit
     def integrate_main(i, params, particle_x, particle_v, particle_a, scratch_x, obstacle_box, particle_vh, time_state,

@@ -10,6 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from sphcore.sph import named
 
 INTEGRATORS = ("symplectic_euler", "verlet")  # scene key time.integrator -> VERLET (index)
 
@@ -50,4 +51,4 @@ def integrators(spec, real=np.float32):
             return v_x + (f32(0.5) * dt) * a_x, v_y + (f32(0.5) * dt) * a_y, v_z + (f32(0.5) * dt) * a_z
         return v_x, v_y, v_z
 
-    return symplectic_euler_kick, verlet_kick, drift_velocity, stored_velocity
+    return named(symplectic_euler_kick, verlet_kick, drift_velocity, stored_velocity)

@@ -14,6 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from sphcore.sph import named
 
 
 @lru_cache(maxsize=None)
@@ -57,4 +58,4 @@ def kernels(spec, real=np.float32):
             return kernel_gradient(P, r2, rlen) * rlen / (r2 + real(0.01) * P.h2)
         return P.h - rlen
 
-    return kernel_w, kernel_gradient, pair_gradient, kernel_laplacian
+    return named(kernel_w, kernel_gradient, pair_gradient, kernel_laplacian)

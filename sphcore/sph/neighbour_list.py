@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph import named
 from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import IMAGE_SHIFT, NEIGHBOUR_MASK, lane_of, list_slots, load_chunk
 from sphcore.sph.kernels import kernels
@@ -22,9 +23,9 @@ from sphcore.sph.pairs import pairs
 
 @lru_cache(maxsize=None)
 def neighbour_list(spec, real=np.float32):
-    reflected = cells(spec, real)[3]
+    reflected = cells(spec, real).reflected
     pair_direction = pairs(real)
-    pair_gradient = kernels(spec, real)[2]
+    pair_gradient = kernels(spec, real).pair_gradient
     GRADIENTS, LIST_BY_PARTICLE, LIST_CHUNKS = spec.GRADIENTS, spec.LIST_BY_PARTICLE, spec.LIST_CHUNKS
     list_slot = list_slots(spec)
 
@@ -79,4 +80,4 @@ def neighbour_list(spec, real=np.float32):
         g = real(P.pressure_coef) / real(P.rest_density) * pair_gradient(P, r2, rlen, image)
         return chunk, j, image, -(g * r_hat_x), -(g * r_hat_y), -(g * r_hat_z)
 
-    return listed_pair, listed_gradient, listed_distance
+    return named(listed_pair, listed_gradient, listed_distance)

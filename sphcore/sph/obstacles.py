@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from sphcore.sph import named
 
 
 @lru_cache(maxsize=None)
@@ -65,4 +66,4 @@ def obstacles(spec, real=np.float32):
                 return True
         return False
 
-    return near_obstacles, solid
+    return named(near_obstacles, solid)

@@ -10,6 +10,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph import named
 from sphcore.sph.kernels import kernels
 
 SHIFTINGS = ("none", "lind")  # scene key physics.shifting -> SHIFTING (index)
@@ -18,7 +19,7 @@ SHIFTINGS = ("none", "lind")  # scene key physics.shifting -> SHIFTING (index)
 @lru_cache(maxsize=None)
 def shifting(spec, real=np.float32):
     DIM = spec.DIM
-    kernel_w = kernels(spec, real)[0]
+    kernel_w = kernels(spec, real).kernel_w
 
     @njit
     def shifting_lind(P, r2, rlen, rhoj, grad, r_hat_x, r_hat_y, r_hat_z):
@@ -39,4 +40,4 @@ def shifting(spec, real=np.float32):
         d = -P.shifting_coef * speed * dt * min((sums_w - tfs) / (real(DIM) - tfs), real(1.0))
         return d * sums_x, d * sums_y, d * sums_z
 
-    return shifting_lind, shift_of
+    return named(shifting_lind, shift_of)

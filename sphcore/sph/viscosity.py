@@ -10,6 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from sphcore.sph import named
 
 VISCOSITY_MODELS = ("laminar", "artificial")  # scene key physics.viscosity_model -> VISCOSITY_MODEL (index)
 
@@ -51,4 +52,4 @@ def viscosity(spec, real=np.float32):
             return f_x, f_y, f_z
         return f_x / rhoi, f_y / rhoi, f_z / rhoi
 
-    return laminar_mueller, artificial_monaghan, viscous_term, viscous_acceleration
+    return named(laminar_mueller, artificial_monaghan, viscous_term, viscous_acceleration)

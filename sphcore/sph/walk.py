@@ -22,9 +22,12 @@ from sphcore.sph.obstacles import obstacles
 @lru_cache(maxsize=None)
 def walk(spec, real, pair):
     GRID, OBSTACLES, MAX_NEIGHBOURS, LIST_SKIN = spec.GRID, spec.OBSTACLES, spec.MAX_NEIGHBOURS, spec.LIST_SKIN
-    cell_of, cell_index, near_walls, reflected, range_count, range_cells = cells(spec, real)
-    solid = obstacles(spec, real)[1]
-    listed_distance = neighbour_list(spec, real)[2]
+    cell_of = cells(spec, real).cell_of
+    reflected = cells(spec, real).reflected
+    range_count = cells(spec, real).range_count
+    range_cells = cells(spec, real).range_cells
+    solid = obstacles(spec, real).solid
+    listed_distance = neighbour_list(spec, real).listed_distance
 
     @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
     def walk_neighbours(P, particle_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i,

@@ -9,6 +9,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from sphcore.sph import named
 
 WALL_MODELS = ("free_slip", "no_slip")  # scene key domain.wall_model -> NO_SLIP (index)
 
@@ -37,4 +38,4 @@ def walls(spec, real=np.float32):
             return no_slip(v_x, v_y, v_z)
         return free_slip(v_x, v_y, v_z, image)
 
-    return free_slip, no_slip, image_velocity
+    return named(free_slip, no_slip, image_velocity)
