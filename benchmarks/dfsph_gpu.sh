@@ -13,12 +13,7 @@
 # glslang debs) and .whl (the vulkan, cffi and pycparser wheels for its Python 3.12) carried there.
 set -u -o pipefail
 OUT=${OUT:-benchmarks/results/dfsph/h200}
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
-export PYTHONPATH=/tmp/site:. VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json \
-       PYTHONUNBUFFERED=1 SPHCORE_CACHE_DIR=/tmp/spvcache
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
+. benchmarks/gpu_env.sh
 mkdir -p "$OUT"
 for r in ${RES:-40 80}; do
     for solver in ${SOLVERS:-state_equation dfsph}; do

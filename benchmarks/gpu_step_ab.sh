@@ -5,16 +5,12 @@
 # summary of B / A per case (the median of the rounds' steps/s), printed and written to $OUT/summary.json.
 # Cases: the 3D dam break of steps_per_second.py (Tait, h = 2 dx, a sort every step) at $COUNTS particles
 # (default 1048576), and the same with the neighbour lists reused (physics.list_skin = 0.1).
-# Run from the repository root on the device machine, with the ignored folders .gl (Vulkan loader and glslang
-# debs), .whl (the vulkan, cffi, pycparser and tqdm wheels for its Python 3.12) and base/ carried there.
+# Run from the repository root on the device machine, with the ignored folders .gl and .whl (benchmarks/gpu_env.sh)
+# and base/ carried there.
 set -u -o pipefail
 A=${A:-base}
 OUT=${OUT:-benchmarks/results/step_ab}
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
-export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json PYTHONUNBUFFERED=1
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
+. benchmarks/gpu_env.sh
 mkdir -p "$OUT"
 OUT=$(realpath "$OUT")
 for round in $(seq 1 "${ROUNDS:-3}"); do

@@ -13,12 +13,8 @@
 # there. TAR=1 packs the results into $OUT/model.tgz (the device tool brings back at most 8 files).
 set -u -o pipefail
 OUT=${OUT:-validation/results}
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
-export PYTHONPATH=/tmp/site:. VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json \
-       PYTHONUNBUFFERED=1 SPHCORE_CACHE_DIR=/tmp/spvcache OMP_WAIT_POLICY=passive
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
+. benchmarks/gpu_env.sh
+export OMP_WAIT_POLICY=passive
 dir=$OUT/model
 mkdir -p "$dir"
 run() {  # run NAME ARGS...: `sphcore validate ARGS --out $dir/NAME --backend vulkan`, its log's last line printed

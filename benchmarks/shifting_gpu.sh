@@ -8,17 +8,11 @@
 # with $OLD_SHADERS, default out/h3_old_shaders: a copy of shaders/ with compute_forces.comp and integrate.comp
 # of the commit before, `git show f215964:shaders/sph/compute_forces.comp`), 1 M particles in 3D, with and
 # without reused lists, alternating. Each run stops after $LIMIT seconds (default 200).
-# Run from the repository root on the device machine, with .gl, .whl and $OLD_SHADERS carried there; where the
-# NVIDIA Vulkan driver is not found (vkCreateInstance: "Found no drivers"), also the glvnd libraries
-# (apt-get download libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2 into $EXTRA_DEBS, default out/h3_gl).
+# Run from the repository root on the device machine, with .gl, .whl (benchmarks/gpu_env.sh) and $OLD_SHADERS
+# carried there.
 set -u -o pipefail
 OUT=${OUT:-benchmarks/results/shifting}
-for f in .gl/*.deb ${EXTRA_DEBS:-out/h3_gl}/*.deb; do [ -f "$f" ] && dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
-export PYTHONPATH=/tmp/site:. VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json \
-       PYTHONUNBUFFERED=1 SPHCORE_CACHE_DIR=/tmp/spvcache
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
+. benchmarks/gpu_env.sh
 mkdir -p "$OUT"
 for r in ${RES:-40}; do
     for case in ${CASES:-tank dam-break dam-break-pressure}; do

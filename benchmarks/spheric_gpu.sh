@@ -8,12 +8,9 @@
 # carried there, and OUT set to the folder the results go to. The PNGs were drawn here from the CSV
 # and JSON with sphcore.validate.spheric.read_results and plot.
 set -u -o pipefail
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
-export PYTHONPATH=/tmp/site:. VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json \
-       PYTHONUNBUFFERED=1 SPHCORE_CACHE_DIR=.spvcache OMP_WAIT_POLICY=passive
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
+export SPHCORE_CACHE_DIR=.spvcache
+. benchmarks/gpu_env.sh
+export OMP_WAIT_POLICY=passive
 run() {  # run NAME ARGS...: the case into $OUT/NAME, its log's last lines printed
     python3 -m sphcore validate spheric --out "$OUT/$1" --backend vulkan --t-end 6 "${@:2}" > "/tmp/$1.log" 2>&1
     echo "$1 rc=$?"
