@@ -7,7 +7,8 @@ removed.
   holder's pid (from /proc/locks).
 - The manifest, DIR/sphcore-run.json, lists every file a run (and `sphcore plot`, `--profile`)
   wrote there; it is rewritten (atomically) before each new file is written, so it never misses
-  one. The names a run writes: scene.json, checkpoint.npz, final.npz, NAME.pvd, NAME_NNNNNNN.vtp
+  one. The names a run writes: scene.json, checkpoint.npz, final.npz, walls.vtp (the bodies' wall particles),
+  NAME.pvd, NAME_NNNNNNN.vtp
   (NAME: the scene's name), profile.json, and `sphcore plot`'s final.png.
 - A file in the way, one of those names that no manifest lists (the user's own scene.json, a
   ParaView state NAME.pvd, an experiment's NAME_0000001.vtp), is never replaced or deleted: the
@@ -43,10 +44,10 @@ from sphcore.output import atomic_file
 
 MANIFEST = "sphcore-run.json"
 SNAPSHOT = re.compile(r".+_\d{7}\.vtp$")
-RUN_FILES = ("checkpoint.npz", "final.npz", "final.png", "scene.json", "profile.json")
+RUN_FILES = ("checkpoint.npz", "final.npz", "final.png", "scene.json", "profile.json", "walls.vtp")
 TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 # What `--overwrite` deletes (with the manifest's say-so), for `sphcore run --help`
-PATTERNS = "checkpoint.npz, final.npz, final.png, profile.json, scene.json, NAME.pvd, NAME_NNNNNNN.vtp"
+PATTERNS = "checkpoint.npz, final.npz, final.png, profile.json, scene.json, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp"
 
 
 def is_run_name(name):
@@ -57,8 +58,8 @@ def is_run_name(name):
 
 def names_of_run(scene_name):
     """A test for the names a run of the scene named `scene_name` writes (scene.json, checkpoint.npz,
-    final.npz, NAME.pvd, NAME_NNNNNNN.vtp)."""
-    pattern = re.compile(rf"(scene\.json|checkpoint\.npz|final\.npz|{re.escape(scene_name)}(\.pvd|_\d{{7}}\.vtp))")
+    final.npz, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp)."""
+    pattern = re.compile(rf"(scene\.json|checkpoint\.npz|final\.npz|walls\.vtp|{re.escape(scene_name)}(\.pvd|_\d{{7}}\.vtp))")
     return lambda name: bool(pattern.fullmatch(name))
 
 

@@ -47,7 +47,7 @@ def check_grid(sim, status):
 def check_state(sim, state):
     """Raise SimulationError at the first particle with a non-finite value or outside the box."""
     for name, values in state.items():
-        bad = ~np.isfinite(values.reshape(sim.n, -1)).all(axis=1)
+        bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
         if bad.any():
             i = int(np.argmax(bad))
             dt_max, bound = stable_dt(sim.scene)
@@ -84,7 +84,7 @@ def check_energy(sim, state):
     c = math.sqrt(scene["fluid.stiffness"])
     g = math.sqrt(sum(a * a for a in scene["forces.gravity"])) if scene["physics.gravity"] else 0.0
     allowed = (sim.energy_start + 0.1 * abs(sim.energy_start)
-               + sim.n * scene.mass * (g * scene.h / 4 + 0.5 * (0.01 * c) ** 2))
+               + sim.fluid_count * scene.mass * (g * scene.h / 4 + 0.5 * (0.01 * c) ** 2))
     speed = np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1))
     fall = scene.speed_estimate() + (g * sim.time if scene["domain.boundary"] == "open" else 0.0)
     limit = 2.0 * (c + fall)

@@ -140,7 +140,7 @@ def pyramid_levels(cell_total):
 def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, cohesion, dt, restitution,
                     gravity, box_min, box_max, grid_dim=(1, 1, 1), kernel="mueller", density_diffusion="none",
                     diffusion_delta=0.1, gravity_on=True, viscosity_model="laminar", alpha=0.0, cfl_number=0.0,
-                    reach=None, cell_split=1, spacing=0.0, shifting=0.0):
+                    reach=None, cell_split=1, spacing=0.0, shifting=0.0, fluid_count=None):
     """One record of PARAMS_DTYPE with all constant factors folded in (float32). Vectors of
     `dim` components are padded with zeros to three. `kernel`: physics.kernel; `density_diffusion`
     ("none" | "molteni" | "fourtakas") with coefficient `diffusion_delta` (fluid.density_diffusion);
@@ -149,12 +149,14 @@ def fold_parameters(n, dim, h, mass, rest_density, stiffness, tait, viscosity, c
     (mu), artificial `alpha` (fluid.alpha; viscosity_coef = alpha c h, c = sqrt(stiffness));
     `cfl_number`: 0.25 time.dt_fraction where time.dt = "adaptive" (then `dt` is the largest step).
     The grid's cells are `cell_split` to the search's `reach` (h, or a reused list's; CELL_SPLIT).
-    `shifting`: A of physics.shifting = "lind" (fluid.shifting; 0: none), at the lattice's `spacing` dx."""
+    `shifting`: A of physics.shifting = "lind" (fluid.shifting; 0: none), at the lattice's `spacing` dx.
+    `fluid_count`: the fluid's particles among the n (default all; the rest are the bodies' wall particles)."""
     c = kernel_coefficients(h, dim, kernel)
     pad = lambda v: list(v) + [0.0] * (3 - len(v))  # noqa: E731
     params = np.zeros(1, PARAMS_DTYPE)
     p = params[0]
     p["n"] = n
+    p["fluid_count"] = n if fluid_count is None else fluid_count
     p["h"] = h
     p["h2"] = h * h
     p["density_coef"] = mass * c["w"]

@@ -26,6 +26,7 @@ from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.scatter_particles import scatter_particles
 from sphcore.sph.sort_cells import sort_cells
+from sphcore.sph.wall_pressure import wall_pressure
 from sphcore.stage import ALWAYS, BUILD, REUSE, Stage  # noqa: F401 (sphcore.plan.ALWAYS)
 
 REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
@@ -114,10 +115,13 @@ STAGES = {
                                                        "particle_neighbours", "obstacle_box", "particle_drho",
                                                        "control", "neighbours", "neighbour_count")),
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
-                                                     "particle_p", "cell_pyramid", "cell_start", "scratch_x",
+                                                     "particle_p", "particle_id", "cell_pyramid", "cell_start", "scratch_x",
                                                      "obstacle_box", "control", "neighbours",
                                                      "neighbour_count", "scratch_v")),
-    "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial")),
+    "wall_pressure": (wall_pressure, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
+                                                   "particle_id", "cell_pyramid", "cell_start", "scratch_x",
+                                                   "obstacle_box", "neighbours", "neighbour_count")),
+    "reduce_dt": (reduce_dt, "particles", ("particle_v", "particle_a", "dt_partial", "particle_id")),
     "choose_dt": (choose_dt, "one", ("time_state", "dt_partial")),
     "dfsph_factor": (dfsph_factor, "particles", ("particle_x", "particle_p", "obstacle_box", "particle_alpha",
                                                  "control", "dfsph_state", "particle_kappa", "neighbours",
@@ -134,7 +138,7 @@ STAGES = {
                                                      "neighbours", "neighbour_count", "neighbour_gradients",
                                                      "scratch_v")),
     "integrate": (integrate, "particles", ("particle_x", "particle_v", "particle_a", "scratch_x", "obstacle_box",
-                                           "particle_vh", "time_state", "control", "scratch_v")),
+                                           "particle_vh", "time_state", "control", "scratch_v", "particle_id")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
                                                            "time_state")),
 }
@@ -150,7 +154,8 @@ def neighbour_stages(cell_total):
 
 def density_stages(scene):
     """The stages of a step up to its density (Simulation.compute_densities runs them alone): with the grid
-    the sort, then compute_density, and integrate_density where the density is state (continuity)."""
+    the sort, then compute_density, integrate_density where the density is state (continuity), and the bodies'
+    wall particles' pressure from the fluid's (wall_pressure)."""
     spec = scene.spec
     stages = neighbour_stages(int(np.prod(scene.grid_dim))) if spec.GRID else []
     stages += [Stage("compute_density")]
@@ -158,7 +163,8 @@ def density_stages(scene):
     # (compute_density at level 1); compute_forces clears the request that integrate sets (cells.glsl)
     if spec.LIST_SKIN:
         stages = [s._replace(when=BUILD) for s in stages] + [Stage("compute_density", 1, when=REUSE)]
-    return stages + ([Stage("integrate_density")] if spec.CONTINUITY else [])  # the density is state (continuity)
+    stages += [Stage("integrate_density")] if spec.CONTINUITY else []  # the density is state (continuity)
+    return stages + ([Stage("wall_pressure")] if spec.BODIES else [])  # the bodies' wall particles (Adami 2012)
 
 
 def plan(scene):

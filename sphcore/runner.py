@@ -23,7 +23,7 @@ from sphcore import folder, memory
 from sphcore.backends import check_options
 from sphcore.checkpoint import CARRIED, CHECKPOINT, MAX_STEP, read_checked, read_scene
 from sphcore.errors import CheckpointError, CheckpointFieldError, Interrupted, SimulationError, VulkanError
-from sphcore.output import SnapshotSeries
+from sphcore.output import SnapshotSeries, vtp_bytes
 from sphcore.scene import Scene, read_limited
 from sphcore.signals import Signals
 from sphcore.sph.dfsph import CONTROL_BUILDS
@@ -124,6 +124,8 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
                 series.truncate(sim.step_count)  # snapshots past the checkpoint: of steps that will run again
                 note_resume(checkpoint, sim, out_dir)
             state = sim.read()
+            if checkpoint is None and sim.n > sim.fluid_count:  # the bodies' wall particles: fixed, written once
+                run_folder.write_bytes("walls.vtp", vtp_bytes(sim.walls["particle_x"], {"body": sim.walls["body"]}))
             if checkpoint is None:
                 snapshot(state)
                 save_checkpoint()

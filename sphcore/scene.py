@@ -769,7 +769,8 @@ class Scene:
                     NO_SLIP=self["domain.wall_model"] == "no_slip", VERLET=self["time.integrator"] == "verlet",
                     ADAPTIVE_DT=self.adaptive_dt, DFSPH=self.dfsph,
                     MAX_NEIGHBOURS=self.max_neighbours if self.dfsph else 0, LIST_SKIN=self.skin_thousandths,
-                    CELL_SPLIT=self.cell_split, SHIFTING=int(physics["shifting"] == "lind"))
+                    CELL_SPLIT=self.cell_split, SHIFTING=int(physics["shifting"] == "lind"),
+                    BODIES=bool(self.config.get("bodies")))
 
     def spec_for(self, backend):
         """The spec a run on `backend` compiles: the scene's, and with the state equation also neighbour
@@ -797,8 +798,13 @@ class Scene:
         return spec._replace(LIST_BY_PARTICLE=backend == "numba" and listed,
                              LIST_CHUNKS=backend == "vulkan" and listed and not spec.DFSPH)
 
-    def params(self, n):
-        """The folded parameter block for n particles (sphcore.params.PARAMS_DTYPE)."""
+    def wall_positions(self):
+        """The bodies' wall particles: (positions (N_w, dim), body index (N_w,))."""
+        return np.zeros((0, self.dim), self.initial_positions().dtype), np.zeros(0, np.int32)
+
+    def params(self, n, fluid_count=None):
+        """The folded parameter block for n particles, the first `fluid_count` (default all) the fluid's
+        (sphcore.params.PARAMS_DTYPE)."""
         return fold_parameters(
             n=n, dim=self.dim, h=self.h, mass=self.mass, rest_density=self["fluid.rest_density"],
             stiffness=self["fluid.stiffness"], tait=self["physics.equation_of_state"] == "tait",
@@ -811,7 +817,7 @@ class Scene:
             cfl_number=(self["time.cfl_number"] / self["fluid.smoothing_ratio"] if self.dfsph
                         else 0.25 * self["time.dt_fraction"] if self.adaptive_dt else 0.0),
             reach=self.reach, cell_split=self.cell_split, spacing=self["fluid.spacing"],
-            shifting=self["fluid.shifting"] if self["physics.shifting"] != "none" else 0.0)
+            shifting=self["fluid.shifting"] if self["physics.shifting"] != "none" else 0.0, fluid_count=fluid_count)
 
     def to_json(self):
         """Every key as JSON (what scene.json and final.npz keep; Scene.from_dict(json.loads(...)) reads it)."""

@@ -99,14 +99,19 @@ class Simulation:
             backend_options.setdefault("before_allocating",
                                        lambda ctx: memory.check(scene, backend, ctx.device_type == "CPU"))
         self.scene = scene
+        # the fluid's particles, then the bodies' wall particles (fixed: ids fluid_count and up)
         x0 = scene.initial_positions()
+        walls, self.wall_body = scene.wall_positions()
+        self.fluid_count = len(x0)
+        x0 = np.concatenate([x0, walls]).astype(x0.dtype)
         self.n, self.dim = len(x0), scene.dim
-        self.params = scene.params(self.n)
+        self.params = scene.params(self.n, self.fluid_count)
         self.spec = scene.spec_for(backend)  # (neighbour lists with the state equation too, where they fit)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
                             self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS)
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
+        state["particle_rho"][self.fluid_count:] = scene["fluid.rest_density"]  # (wall_pressure sets the walls')
         self.solver = solver_for(scene)  # what the pressure solver adds to the step (sphcore.solvers)
         self.solver.init_state(state)
         self.stages = plan(scene)
@@ -170,11 +175,14 @@ class Simulation:
 
     @_exclusive
     def read(self):
-        """The state in particle order (vectors of `dim` components), checked. A check that fails
-        more than one step after the last good one is replayed from there a step at a time, so
-        the error names the first step at which the state went wrong."""
+        """The fluid's state in particle order (vectors of `dim` components), checked; the bodies' wall particles'
+        in `walls` (with their body's index, `body`). A check that fails more than one step after the last good one
+        is replayed from there a step at a time, so the error names the first step at which the state went wrong."""
         raw = self.backend.read(READ)  # (not the scratch, the grid or the neighbour lists: each step rewrites them)
         state = in_particle_order(raw, self.dim)
+        self.walls = {name: values[self.fluid_count:] for name, values in state.items()}
+        self.walls["body"] = self.wall_body
+        state = {name: values[:self.fluid_count] for name, values in state.items()}
         try:
             health.check_state(self, state)
             health.check_grid(self, raw["grid_status"])
@@ -248,7 +256,7 @@ class Simulation:
         stored = float(arrays.get("energy_start", math.nan))
         c2 = self.scene["fluid.stiffness"]
         if "energy_start" in arrays and not abs(stored - self.energy_start) <= 1e-3 * (
-                abs(self.energy_start) + self.n * self.scene.mass * 1e-4 * c2):
+                abs(self.energy_start) + self.fluid_count * self.scene.mass * 1e-4 * c2):
             raise CheckpointError(f"checkpoint field energy_start = {stored:.6g} J is not the energy of the scene's "
                                   f"initial state, {self.energy_start:.6g} J: the checkpoint was altered")
         current = self.backend.read(CARRIED)

@@ -3,7 +3,9 @@
 // pairs; wall and obstacle-face images (WALLS, OBSTACLES); linear or Tait equation of state (TAIT).
 // The kernel is kernels.glsl's (KERNEL). Summation density: rho_i = sum_j m W_ij. Continuity
 // density (CONTINUITY): rho_i is state, integrated by integrate.comp from the d rho/dt written here
-// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). With neighbour
+// (particle_drho), with density diffusion (DENSITY_DIFFUSION, density_diffusion.glsl). The bodies' wall particles
+// (BODIES) count as fluid of their density in the sum, as fixed particles in the rate; wall_pressure.comp then
+// sets their own density and pressure. With neighbour
 // lists (MAX_NEIGHBOURS > 0: DFSPH, and the state equation where they fit, Scene.spec_for) the scan also writes the
 // particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists
 // reused between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps
@@ -79,14 +81,16 @@ uint listed_sum(uint i, real3 xi, real3 wall, uint count, inout real sum_w) {
 
 // Continuity density: one other particle's or image's terms of d rho_i/dt, at r = xi - x_k within h
 // (k: j's image across the walls of `image`'s bits), added to sum_div and sum_diffusion; the scan's and a reused
-// list's walk's
+// list's walk's. A wall particle of the bodies (BODIES) is fixed: its velocity here is 0 (wall_pressure.comp's is
+// the viscous term's), and the diffusion is between fluid particles only.
 void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, real rhoi, real3 inward,
               inout real sum_div, inout real sum_diffusion) {
     // the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity is mirrored on its
     // flipped axes
     real rlen = sqrt(r2);
     real3 r_hat = pair_direction(r, rlen, i, j, image, inward);
-    real3 vj = particle_v[j].xyz;
+    bool wall_j = BODIES && particle_id[j] >= P.fluid_count;
+    real3 vj = wall_j ? real3(0.0) : particle_v[j].xyz;
     real vk_x = (image & 1u) != 0u ? -vj.x : vj.x;
     real vk_y = (image & 2u) != 0u ? -vj.y : vj.y;
     real vk_z = (image & 4u) != 0u ? -vj.z : vj.z;
@@ -95,7 +99,7 @@ void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, 
     sum_div += pair_gradient(r2, rlen, image) * v_r;
     // density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an image carries
     // its particle's density, so its hydrostatic difference is its particle's
-    if (DENSITY_DIFFUSION > 0u)
+    if (DENSITY_DIFFUSION > 0u && !wall_j)
         sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
 }
 

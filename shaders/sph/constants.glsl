@@ -48,3 +48,6 @@ layout(constant_id = 27) const uint CELL_SPLIT = 1;       // cells per search re
 // Particle shifting (issue 31): each term a helper in an include, called from the one neighbour walk (walk.glsl).
 layout(constant_id = 28) const uint SHIFTING = 0;         // 0: none, 1: Lind et al. 2012's Fickian shifting
                                                           // (physics.shifting; shifting.glsl)
+// Bodies from meshes and polygons (issue 33): Adami et al. 2012's wall particles, the particles whose id is
+// P.fluid_count or more (wall_pressure.comp gives them the fluid's pressure and velocity; integrate leaves them).
+layout(constant_id = 29) const bool BODIES = false;       // the scene has [[bodies]] (sphcore/geometry.py)

@@ -3,7 +3,8 @@
 // obstacles, one invocation per particle. dt is P.dt, or with ADAPTIVE_DT the one choose_dt.comp wrote
 // into time_state on the device this step (no readback). Reused lists (LIST_SKIN): a particle that has moved
 // too far from where it was at the lists' build asks for the next build (cells.glsl: moved_limit2). With shifting
-// (SHIFTING) the drift is followed by the particle's shift (shifting.glsl), before the walls.
+// (SHIFTING) the drift is followed by the particle's shift (shifting.glsl), before the walls. The bodies' wall
+// particles (BODIES) are fixed: left as they are.
 // Mirror: sphcore/sph/integrate.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -26,11 +27,12 @@ layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; 
 layout(std430, binding = 19) buffer ParticleVh { real4 particle_vh[]; };
 layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 24) buffer Control { uint control[]; };  // LIST_SKIN: CONTROL_REBUILD
+layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };  // BODIES: a wall particle's id
 
 void main() {
-    // [1] one invocation per particle; the grid is rounded up to whole work groups
+    // [1] one invocation per fluid particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
-    if (i >= P.n) return;
+    if (i >= P.n || (BODIES && particle_id[i] >= P.fluid_count)) return;
     // [2] the step's dt: P.dt, or the device's (time_state: dt, the last step's dt, time; choose_dt.comp)
     float dt = ADAPTIVE_DT ? time_state[0].x : P.dt;
     float dt_prev = VERLET ? time_state[0].y : 0.0;

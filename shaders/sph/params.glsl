@@ -7,6 +7,8 @@
 // are SI. In 2D the z components are 0 and unused.
 layout(std140, binding = 63) uniform Params {
     uint n;               // particle count
+    uint fluid_count;     // the fluid's particles, ids 0 .. fluid_count - 1; the wall particles of the bodies
+                          // (BODIES) follow, fixed
     float h;              // support radius [m] (every kernel is zero past h)
     float h2;             // h^2 [m^2]
     float density_coef;   // m times W's coefficient (kernels.glsl: m W = density_coef kernel_w); mueller:

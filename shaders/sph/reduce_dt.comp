@@ -4,7 +4,7 @@
 // reduced in shared memory to one partial per group in dt_partial; choose_dt.comp reduces the
 // partials and sets the step's dt on the device. A maximum is exact in any order, so the result
 // depends neither on the reduction tree nor on the GPU's schedule: both backends get the same bits.
-// One invocation per particle.
+// One invocation per particle; the bodies' wall particles (BODIES) hold 0: they do not move.
 // Mirror: sphcore/sph/reduce_dt.py (same names, same statement order, same step labels; one local
 // loop per phase between barriers).
 #extension GL_GOOGLE_include_directive : require
@@ -15,6 +15,7 @@ layout(local_size_x_id = 0) in;
 
 layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
 layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };  // BODIES: a wall particle's id
 layout(std430, binding = 21) writeonly buffer DtPartial { real dt_partial[]; };  // (|v|^2, |a|^2) per group
 
 shared real s_v2[gl_WorkGroupSize.x];
@@ -26,7 +27,7 @@ void main() {
     uint lid = gl_LocalInvocationID.x;
     real v2 = real(0.0);
     real a2 = real(0.0);
-    if (i < P.n) {
+    if (i < P.n && !(BODIES && particle_id[i] >= P.fluid_count)) {
         real3 v = particle_v[i].xyz;
         real3 a = particle_a[i].xyz;
         v2 = v.x * v.x + v.y * v.y + v.z * v.z;

@@ -57,7 +57,7 @@ def compute_density(spec, real=np.float32):
     near_obstacles = obstacles(spec, real).near_obstacles
     solid = obstacles(spec, real).solid
     OBSTACLES = spec.OBSTACLES
-    CONTINUITY, DENSITY_DIFFUSION = spec.CONTINUITY, spec.DENSITY_DIFFUSION
+    CONTINUITY, DENSITY_DIFFUSION, BODIES = spec.CONTINUITY, spec.DENSITY_DIFFUSION, spec.BODIES
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     # A scan with no branch on the distance (BRANCH_FREE_SCAN, where the list is written and the density summed):
     # once the flow has lost its lattice a CPU mispredicts that branch, about one candidate in seven being a
@@ -91,18 +91,20 @@ def compute_density(spec, real=np.float32):
         return count - self_seen, sum_w
 
     @njit
-    def add_rate(P, particle_x, particle_v, particle_rho, i, j, image, r_x, r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y,
+    def add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x, r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y,
                  vi_z, rhoi, inward_x, inward_y, inward_z, sum_div, sum_diffusion):
         """Continuity density: one other particle's or image's terms of d rho_i/dt, at r = xi - x_k
         within h (k: j's image across the walls of `image`'s bits), added to sum_div and sum_diffusion (returned);
-        the scan's and a reused list's walk's."""
+        the scan's and a reused list's walk's. A wall particle of the bodies (BODIES) is fixed: its velocity here is
+        0, and the diffusion is between fluid particles only."""
         # the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity is mirrored on its
         # flipped axes
         rlen = np.sqrt(r2)
         r_hat_x, r_hat_y, r_hat_z = pair_direction(r_x, r_y, r_z, rlen, i, j, image, inward_x, inward_y, inward_z)
-        vj_x = particle_v[j, 0]
-        vj_y = particle_v[j, 1]
-        vj_z = particle_v[j, 2]
+        wall_j = BODIES and particle_id[j] >= P.fluid_count
+        vj_x = real(0.0) if wall_j else particle_v[j, 0]
+        vj_y = real(0.0) if wall_j else particle_v[j, 1]
+        vj_z = real(0.0) if wall_j else particle_v[j, 2]
         vk_x = -vj_x if (image & 1) != 0 else vj_x
         vk_y = -vj_y if (image & 2) != 0 else vj_y
         vk_z = -vj_z if (image & 4) != 0 else vj_z
@@ -111,7 +113,7 @@ def compute_density(spec, real=np.float32):
         sum_div += pair_gradient(P, r2, rlen, image) * v_r
         # density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an image carries
         # its particle's density, so its hydrostatic difference is its particle's
-        if DENSITY_DIFFUSION > 0:
+        if DENSITY_DIFFUSION > 0 and not wall_j:
             sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x, particle_x[j, 1] - xi_y,
                                             particle_x[j, 2] - xi_z, r2, rlen)
         return sum_div, sum_diffusion
@@ -186,7 +188,7 @@ def compute_density(spec, real=np.float32):
                 if not CONTINUITY:
                     sum_w += kernel_w(P, r2)
                 if CONTINUITY:
-                    sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, i, j, image, r_x, r_y,
+                    sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x, r_y,
                                                       r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi, inward_x,
                                                       inward_y, inward_z, sum_div, sum_diffusion)
         for image in range(8):
@@ -242,7 +244,7 @@ def compute_density(spec, real=np.float32):
                     # [7] continuity: the rates of the others within h (add_rate: the velocity divergence, d rho_i/dt,
                     #     and the density diffusion D_i)
                     if CONTINUITY and within and (j != i or image != 0):
-                        sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, i, j, image, r_x,
+                        sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x,
                                                           r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
                                                           inward_x, inward_y, inward_z, sum_div, sum_diffusion)
         if listing:

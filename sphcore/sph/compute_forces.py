@@ -1,7 +1,8 @@
 """Acceleration from pressure (Monaghan 1992: pressure.py), viscosity (laminar, Mueller et al. 2003, or artificial,
 Monaghan 1992: viscosity.py; wall images' velocities: walls.py), surface tension by cohesion (Becker &
 Teschner 2007: cohesion.py) and gravity, one invocation per particle; with shifting (shifting.py) also the sums
-integrate shifts the particle by. Each pair's terms are `pair`'s, called by
+integrate shifts the particle by; for the bodies' wall particles (BODIES) the fluid's force on them. Each pair's
+terms are `pair`'s, called by
 the one neighbour walk (walk.py: the list or the scan; wall and obstacle images as in compute_density). Each
 optional term is compiled out by its closure constant, as the shader's by its specialization constant.
 
@@ -31,7 +32,7 @@ from sphcore.workgroups import launcher
 @lru_cache(maxsize=None)
 def compute_forces(spec, real=np.float32):
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
-    DFSPH, SHIFTING = spec.DFSPH, spec.SHIFTING
+    DFSPH, SHIFTING, BODIES, NO_SLIP = spec.DFSPH, spec.SHIFTING, spec.BODIES, spec.NO_SLIP
     near_walls = cells(spec, real).near_walls
     near_walls_within = skin(spec, real).near_walls_within
     list_reach = skin(spec, real).list_reach
@@ -53,10 +54,14 @@ def compute_forces(spec, real=np.float32):
         (pressure.py: Monaghan 1992's symmetric form; DFSPH: the solver's), viscosity of the scene's model
         (viscosity.py; an image's velocity is the wall model's, walls.py) and cohesion between real particles
         only (cohesion.py: Becker & Teschner 2007; the walls are not wetted); the shifting sums, images included
-        (shifting.py: Lind et al. 2012)."""
-        P, particle_v, particle_rho, particle_p, vi_x, vi_y, vi_z, rhoi, pi_rho2 = own
+        (shifting.py: Lind et al. 2012). A wall particle and the fluid: the pressure term, the viscous one with
+        NO_SLIP only (its velocity wall_pressure's), the shifting sums; two wall particles: nothing."""
+        P, particle_v, particle_rho, particle_p, particle_id, wall_i, vi_x, vi_y, vi_z, rhoi, pi_rho2 = own
         (f_pressure_x, f_pressure_y, f_pressure_z, f_viscosity_x, f_viscosity_y, f_viscosity_z,
          f_cohesion_x, f_cohesion_y, f_cohesion_z, f_shift_x, f_shift_y, f_shift_z, f_shift_w) = state
+        wall_j = BODIES and particle_id[j] >= P.fluid_count
+        if wall_i and wall_j:
+            return state
         rhoj = particle_rho[j]
         pj = particle_p[j]
         rlen = np.sqrt(r2)
@@ -69,14 +74,14 @@ def compute_forces(spec, real=np.float32):
             f_pressure_x += fp * r_hat_x
             f_pressure_y += fp * r_hat_y
             f_pressure_z += fp * r_hat_z
-        if VISCOSITY:
+        if VISCOSITY and (NO_SLIP or not (wall_i or wall_j)):
             vk_x, vk_y, vk_z = image_velocity(particle_v[j, 0], particle_v[j, 1], particle_v[j, 2], image)
             t_x, t_y, t_z = viscous_term(P, vi_x, vi_y, vi_z, vk_x, vk_y, vk_z, r_x, r_y, r_z, r2, rhoi, rhoj, grad,
                                          kernel_laplacian(P, r2, rlen), r_hat_x, r_hat_y, r_hat_z)
             f_viscosity_x += t_x
             f_viscosity_y += t_y
             f_viscosity_z += t_z
-        if SURFACE_TENSION and image == 0:
+        if SURFACE_TENSION and image == 0 and not wall_j:
             t_x, t_y, t_z = cohesion_becker(P, r2, r_x, r_y, r_z)
             f_cohesion_x += t_x
             f_cohesion_y += t_y
@@ -93,14 +98,15 @@ def compute_forces(spec, real=np.float32):
     walk_neighbours = walk(spec, real, pair)
 
     @njit
-    def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p,
+    def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, particle_id,
                             cell_pyramid, cell_start, scratch_x, obstacle_box, control, neighbours,
                             neighbour_count, particle_shift):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups
         if i >= P.n:
             return
-        # [2] own state
+        # [2] own state (BODIES: whether i is a wall particle)
+        wall_i = BODIES and particle_id[i] >= P.fluid_count
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
         xi_z = particle_x[i, 2]
@@ -128,10 +134,10 @@ def compute_forces(spec, real=np.float32):
          f_cohesion_x, f_cohesion_y, f_cohesion_z, f_shift_x, f_shift_y, f_shift_z, f_shift_w) = walk_neighbours(
             P, particle_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i, xi_x, xi_y, xi_z,
             x_built_x, x_built_y, x_built_z, mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z,
-            (P, particle_v, particle_rho, particle_p, vi_x, vi_y, vi_z, rhoi, pi_rho2),
+            (P, particle_v, particle_rho, particle_p, particle_id, wall_i, vi_x, vi_y, vi_z, rhoi, pi_rho2),
             (zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero))
         # [5] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
-        #     laminar sum is divided by rho_i, viscosity.glsl)
+        #     laminar sum is divided by rho_i, viscosity.glsl); a wall particle: the fluid's terms only
         a_x = f_pressure_x
         a_y = f_pressure_y
         a_z = f_pressure_z
@@ -140,11 +146,11 @@ def compute_forces(spec, real=np.float32):
             a_x += t_x
             a_y += t_y
             a_z += t_z
-        if SURFACE_TENSION:
+        if SURFACE_TENSION and not wall_i:
             a_x += P.cohesion_coef * f_cohesion_x
             a_y += P.cohesion_coef * f_cohesion_y
             a_z += P.cohesion_coef * f_cohesion_z
-        if GRAVITY:
+        if GRAVITY and not wall_i:
             a_x += P.gravity[0]
             a_y += P.gravity[1]
             a_z += P.gravity[2]

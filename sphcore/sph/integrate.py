@@ -28,15 +28,15 @@ def integrate(spec, real=np.float32):
     stored_velocity = integrators(spec, real).stored_velocity
     moved_limit2 = skin(spec, real).moved_limit2
     LIST_SKIN = spec.LIST_SKIN
-    SHIFTING = spec.SHIFTING
+    SHIFTING, BODIES = spec.SHIFTING, spec.BODIES
     shift_of = shifting(spec, real).shift_of
 
     @njit
     def integrate_main(i, params, particle_x, particle_v, particle_a, scratch_x, obstacle_box, particle_vh, time_state,
-                       control, particle_shift):
+                       control, particle_shift, particle_id):
         P = params[0]
-        # [1] one invocation per particle; the grid is rounded up to whole work groups
-        if i >= P.n:
+        # [1] one invocation per fluid particle; the grid is rounded up to whole work groups
+        if i >= P.n or (BODIES and particle_id[i] >= P.fluid_count):
             return
         # [2] the step's dt: P.dt, or the device's (time_state: dt, the last step's dt, time; choose_dt.comp)
         dt = time_state[0, 0] if ADAPTIVE_DT else P.dt

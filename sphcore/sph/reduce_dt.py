@@ -17,26 +17,27 @@ from sphcore.numba_cache import cached
 
 @lru_cache(maxsize=None)
 def reduce_dt(spec, real=np.float32):
+    BODIES = spec.BODIES
 
     @njit
-    def reduce_dt_load(i, lid, params, particle_v, particle_a, s_v2, s_a2):
+    def reduce_dt_load(i, lid, params, particle_v, particle_a, particle_id, s_v2, s_a2):
         P = params[0]
         # [1] own |v|^2 and |a|^2; an invocation past the last particle holds 0 (all reach the barriers)
         v2 = real(0.0)
         a2 = real(0.0)
-        if i < P.n:
+        if i < P.n and not (BODIES and particle_id[i] >= P.fluid_count):
             v2 = particle_v[i, 0] * particle_v[i, 0] + particle_v[i, 1] * particle_v[i, 1] + particle_v[i, 2] * particle_v[i, 2]
             a2 = particle_a[i, 0] * particle_a[i, 0] + particle_a[i, 1] * particle_a[i, 1] + particle_a[i, 2] * particle_a[i, 2]
         s_v2[lid] = v2
         s_a2[lid] = a2
 
     @njit(parallel=True, error_model="numpy")
-    def launch(n_groups, local_size, params, particle_v, particle_a, dt_partial):
+    def launch(n_groups, local_size, params, particle_v, particle_a, dt_partial, particle_id):
         for group in prange(n_groups):
             s_v2 = np.empty(local_size, real)  # the group's shared memory
             s_a2 = np.empty(local_size, real)
             for lid in range(local_size):
-                reduce_dt_load(group * local_size + lid, lid, params, particle_v, particle_a, s_v2, s_a2)
+                reduce_dt_load(group * local_size + lid, lid, params, particle_v, particle_a, particle_id, s_v2, s_a2)
             # (barrier)
             # [2] tree: at stride s, each invocation at a multiple of 2 s takes the larger of its own and the one s above
             stride = 1
