@@ -8,6 +8,7 @@ import copy
 import dataclasses
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from sphcore import geometry
 from sphcore.errors import SceneError  # noqa: F401 (sphcore.scene.SceneError)
 from sphcore.params import CELL_PADDING, KERNELS, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
 from sphcore.paths import SCENE_DIR
@@ -236,6 +238,13 @@ SCHEMA = {
         "checkpoint_every": Key(1000, "steps", 1, 1e9, "steps between checkpoints (what `sphcore run --resume` "
                                 "continues from)", "int"),
     },
+    "bodies": Key([], "m", -1e3, 1e3, "solid bodies from meshes (3D) and polygons (2D), walled by wall particles: "
+                  '[[bodies]] tables with name (unique), mesh = "file.stl" (3D: a closed STL, OBJ or PLY surface, its path '
+                  "relative to the scene file) or polygon = [[x, y], ...] (2D: a simple closed polygon, its vertices in "
+                  "order), scale (default 1), rotate (degrees about x, then y, then z, about the origin; 2D: one angle; "
+                  "default 0), translate (m, default 0; scale, then rotate, then translate) and fluid (outside: an "
+                  "obstacle in the flow, the default; inside: a container holding the fluid). Fluid blocks are clipped "
+                  "to dx / 2 off every body (docs/scenes.md, Bodies)", "bodies"),
 }
 
 MAX_PARTICLES = 50_000_000
@@ -301,9 +310,69 @@ def _check(where, key, value):
                 raise SceneError(f"{where}[{i}]: min {lo} must be below max {hi} on every axis")
             blocks.append({"min": lo, "max": hi})
         return blocks
+    elif key.kind == "bodies":
+        return _check_bodies(where, key, value)
     if not key.low <= value <= key.high:  # NaN is never within
         raise SceneError(f"{where} = {_shown(value)}: must be within [{key.low:g}, {key.high:g}] {key.unit}")
     return value
+
+
+# the keys of one [[bodies]] table (SCHEMA's "bodies" describes them); rotate and translate default to zeros of
+# the scene's dimension (Scene.from_dict)
+BODY_KEYS = {
+    "name": Key("", "", 0, 0, "", "str"),
+    "scale": Key(1.0, "-", 1e-6, 1e6, ""),
+    "angle": Key(0.0, "deg", -360.0, 360.0, ""),
+    "fluid": Key("outside", "", 0, 0, "", "outside|inside"),
+}
+
+
+def _check_bodies(where, key, value):
+    """The [[bodies]] tables, each checked key by key (what needs the dimension or the geometry waits for
+    Scene._check_bodies); a message names the body, `bodies[1] ("tank")`."""
+    if not isinstance(value, list):
+        raise SceneError(f"{where}: expected a list of tables ([[bodies]] in a scene file), got {_shown(value)}")
+    bodies, names = [], {}
+    for i, body in enumerate(value):
+        at = geometry.where(i, body).replace("bodies", where, 1)
+        if not isinstance(body, dict):
+            raise SceneError(f"{at}: expected a table, got {_shown(body)}")
+        unknown = sorted(set(body) - {"name", "mesh", "polygon", "scale", "rotate", "translate", "fluid"}, key=str)
+        if unknown:
+            raise SceneError(f"{at}: unknown key {_shown(unknown[0])} (known: fluid, mesh, name, polygon, rotate, scale, "
+                             "translate)")
+        if "name" not in body:
+            raise SceneError(f"{at}: give it a name (name = \"...\")")
+        out = {"name": _check(f"{at}.name", BODY_KEYS["name"], body["name"])}
+        if out["name"] in names:
+            raise SceneError(f"{at}: the name is also bodies[{names[out['name']]}]'s; give each body its own")
+        names[out["name"]] = i
+        given = [k for k in ("mesh", "polygon") if k in body]
+        if len(given) != 1:
+            raise SceneError(f"{at}: give exactly one of mesh (3D) and polygon (2D), not "
+                             f"{'both' if given else 'neither'}")
+        if "mesh" in body:
+            if not isinstance(body["mesh"], str) or not body["mesh"] or not body["mesh"].isprintable():
+                raise SceneError(f"{at}.mesh: expected a file name, got {_shown(body['mesh'])}")
+            out["mesh"] = body["mesh"]
+        else:
+            polygon = body["polygon"]
+            if not isinstance(polygon, list) or len(polygon) < 3:
+                raise SceneError(f"{at}.polygon: expected at least 3 vertices [[x, y], ...], got {_shown(polygon)}")
+            vertex = Key(0, key.unit, key.low, key.high, "", "vec")
+            out["polygon"] = [_check(f"{at}.polygon[{k}]", vertex, v) for k, v in enumerate(polygon)]
+            if any(len(v) != 2 for v in out["polygon"]):
+                raise SceneError(f"{at}.polygon: every vertex is [x, y] (a polygon is 2D)")
+        out["scale"] = _check(f"{at}.scale", BODY_KEYS["scale"], body.get("scale", 1.0))
+        if "rotate" in body:
+            angles = body["rotate"]
+            out["rotate"] = ([_check(f"{at}.rotate[{k}]", BODY_KEYS["angle"], a) for k, a in enumerate(angles)]
+                             if isinstance(angles, list) else _check(f"{at}.rotate", BODY_KEYS["angle"], angles))
+        if "translate" in body:
+            out["translate"] = _check(f"{at}.translate", Key(0, key.unit, key.low, key.high, "", "vec"), body["translate"])
+        out["fluid"] = _check(f"{at}.fluid", BODY_KEYS["fluid"], body.get("fluid", "outside"))
+        bodies.append(out)
+    return bodies
 
 
 def _merge(where, schema, given, preset):
@@ -337,6 +406,19 @@ def _resolve_time(config, given):
             raise SceneError(f"time.{steps} = 0: give time.{steps} > 0 or time.{seconds} > 0 s")
 
 
+def _resolve_bodies(config, source):
+    """Each body's rotate and translate defaulted to zeros of the scene's dimension, and its mesh path made
+    absolute (scene.json, which resume reads, must find it): relative to the scene file `source`, or to the
+    working folder for a scene from a dict (`source` "<dict>")."""
+    dim = config["physics"]["dimension"]
+    base = Path.cwd() if source.startswith("<") else Path(source).parent
+    for body in config["bodies"]:
+        body.setdefault("rotate", 0.0 if dim == 2 else [0.0, 0.0, 0.0])
+        body.setdefault("translate", [0.0] * dim)
+        if "mesh" in body:
+            body["mesh"] = os.path.abspath(base / Path(body["mesh"]).expanduser())
+
+
 @dataclass
 class Scene:
     """A validated scene: `config` holds every key, defaults filled in; `scene["fluid.spacing"]`
@@ -357,6 +439,10 @@ class Scene:
     config: dict
     source: str = "<defaults>"
     from_model: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)  # keys physics.model set -> which
+    _made: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)  # the bodies' geometry (_geometry)
+
+    def __getstate__(self):  # a pickled scene (a sweep's task) leaves its loaded meshes behind: made again
+        return {**self.__dict__, "_made": {}}
 
     @classmethod
     def from_dict(cls, data, source="<dict>"):
@@ -370,6 +456,7 @@ class Scene:
                 if name not in data.get(table, {}):
                     config[table][name] = config[table][name] + [z]
         _resolve_time(config, data.get("time", {}))
+        _resolve_bodies(config, source)
         by = f'physics.model = "{model}"' + ("" if named else ", the default")
         given = {f"{table}.{key}" for table, keys in data.items() if isinstance(keys, dict) for key in keys}
         scene = cls(config, source, {k: by for k in PRESETS[model] if k not in given})
@@ -581,12 +668,83 @@ class Scene:
         if count > MAX_PARTICLES:
             raise SceneError(f"fluid.blocks: {count} particles at fluid.spacing = {self['fluid.spacing']:g} m "
                              f"exceeds {MAX_PARTICLES}; raise the spacing")
+        if self["bodies"]:
+            self._check_bodies()
+            count = self.particle_count()
+            if count > MAX_PARTICLES:
+                raise SceneError(f"fluid.blocks and bodies: {count} particles (fluid and wall) at fluid.spacing = "
+                                 f"{self['fluid.spacing']:g} m exceeds {MAX_PARTICLES}; raise the spacing")
         cells = int(np.prod(self.grid_dim))
         if cells > MAX_CELLS:
             raise SceneError(f"domain: the neighbour grid would need {cells} cells of size {self.cell_size:g} m "
                              f"(at most {MAX_CELLS}); shrink the box (domain.box_min, domain.box_max) or raise "
                              "fluid.spacing")
         self._check_numbers(int(count))
+
+    def _check_bodies(self):
+        """Bodies: their keys against the scene's dimension and model, then the geometry (_geometry: the meshes
+        loaded, each body in the box and thick enough), and no fluid block emptied by the clipping."""
+        for i, body in enumerate(self["bodies"]):
+            at = geometry.where(i, body)
+            if self.dim == 2 and "mesh" in body or self.dim == 3 and "polygon" in body:
+                raise SceneError(f"{at}: a {'mesh' if 'mesh' in body else 'polygon'} in a {self.dim}D scene; give "
+                                 f"{'polygon' if self.dim == 2 else 'mesh'} (physics.dimension = {self.dim})")
+            if (self.dim == 2) != isinstance(body["rotate"], float) or self.dim == 3 and len(body["rotate"]) != 3:
+                raise SceneError(f"{at}.rotate = {body['rotate']}: give {'one angle' if self.dim == 2 else '[x, y, z]'} "
+                                 f"in degrees (physics.dimension = {self.dim})")
+            if len(body["translate"]) != self.dim:
+                raise SceneError(f"{at}.translate = {body['translate']} has {len(body['translate'])} components but "
+                                 f"physics.dimension = {self.dim}")
+            if self.dfsph:
+                raise SceneError(f'{at}: bodies need physics.pressure_solver = "state_equation" (the wall particles\' '
+                                 f"pressure is extrapolated from the fluid's), not {self._named(['physics.pressure_solver'])}")
+            if self["domain.boundary"] == "open":
+                raise SceneError(f'{at}: bodies need domain.boundary = "walls" (the wall lattice starts at '
+                                 'domain.box_min), not "open"')
+        made = self._geometry()
+        for i, keep in enumerate(made["keep"]):
+            if not keep.any():
+                raise SceneError(f"fluid.blocks[{i}] = {self['fluid.blocks'][i]}: no particle left after clipping to the "
+                                 "fluid side of the bodies; move the block or the bodies")
+
+    def _geometry(self):
+        """The bodies (sphcore.geometry), their wall particles and each fluid block's mask of kept lattice points,
+        made once for the keys they come from (read from the geometry cache where it has them). SceneError names
+        a body that cannot be read or is not closed, an obstacle outside the box or a container reaching out of
+        it, and an obstacle thinner than the wall layer: its deepest point on the wall lattice (the lattice's
+        half diagonal added, dx sqrt(dim) / 2, for the deepest point between lattice points) is less than h / 2
+        from its surface."""
+        dx, h, lo, hi = self["fluid.spacing"], self.h, self["domain.box_min"], self["domain.box_max"]
+        key = json.dumps([self["bodies"], self["fluid.blocks"], dx, h, lo, hi])
+        if self._made.get("key") == key:
+            return self._made
+        bodies = [geometry.load_body(i, e) for i, e in enumerate(self["bodies"])]
+        for i, body in enumerate(bodies):
+            at = geometry.where(i, self["bodies"][i])
+            b_lo, b_hi = body.bounds
+            if body.fluid == "outside" and any(b_hi[a] <= lo[a] or b_lo[a] >= hi[a] for a in range(self.dim)):
+                raise SceneError(f"{at}: outside the box domain.box_min .. domain.box_max = {lo} .. {hi} (its bounds "
+                                 f"{b_lo.round(6).tolist()} .. {b_hi.round(6).tolist()})")
+            slack = 1e-9 * max(map(abs, lo + hi))
+            if body.fluid == "inside" and any(b_lo[a] < lo[a] - slack or b_hi[a] > hi[a] + slack
+                                              for a in range(self.dim)):
+                raise SceneError(f"{at}: a container whose inside (its bounds {b_lo.round(6).tolist()} .. "
+                                 f"{b_hi.round(6).tolist()}) reaches out of the box domain.box_min .. domain.box_max = "
+                                 f"{lo} .. {hi}; the fluid side must lie in the box")
+            deepest = geometry.body_walls(body, lo, hi, dx, h)[1]
+            if body.fluid == "outside" and deepest + dx * math.sqrt(self.dim) / 2 < h / 2:
+                raise SceneError(f"{at}: thinner than the wall layer: its deepest point is about "
+                                 f"{deepest + dx * math.sqrt(self.dim) / 2:.3g} m from its surface, less than h / 2 = "
+                                 f"{h / 2:g} m (h = fluid.spacing * fluid.smoothing_ratio); make it at least h thick")
+        walls = geometry.wall_particles(bodies, lo, hi, dx, h)
+        keep = [geometry.fluid_mask(bodies, b["min"], self._lattice_shape(b), dx) for b in self["fluid.blocks"]]
+        self._made = {"key": key, "bodies": bodies, "walls": walls, "keep": keep}
+        return self._made
+
+    @property
+    def bodies(self):
+        """The loaded bodies (sphcore.geometry.Body: name, fluid side, centroid, shape), in scene order."""
+        return self._geometry()["bodies"] if self["bodies"] else []
 
     def _check_obstacles(self):
         """Obstacles: at most MAX_OBSTACLES, inside the box, and no particle of a block starting
@@ -689,7 +847,14 @@ class Scene:
         return tuple(dims)
 
     def particle_count(self):
-        """The particles the scene starts with, counted without making them."""
+        """The particles the scene starts with, fluid and wall (fluid_count() + len(wall_positions()[0]))."""
+        return self.fluid_count() + (len(self._geometry()["walls"][1]) if self["bodies"] else 0)
+
+    def fluid_count(self):
+        """The fluid particles the scene starts with: counted without making them where it has no bodies, else
+        the lattice points the clipping keeps (made once)."""
+        if self["bodies"]:
+            return int(sum(keep.sum() for keep in self._geometry()["keep"]))
         return int(sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"]))
 
     def _lattice_shape(self, block):
@@ -697,14 +862,31 @@ class Scene:
         return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(len(block["min"]))]
 
     def initial_positions(self):
-        """Particles at cell centres of a square (cubic) lattice filling each block, (N, dim), in the
+        """Fluid particles at cell centres of a square (cubic) lattice filling each block, where the scene has
+        bodies only those at least dx / 2 off every body on its fluid side (sphcore.geometry), (N, dim), in the
         scene's precision."""
         dx = self["fluid.spacing"]
         parts = []
-        for block in self["fluid.blocks"]:
+        for i, block in enumerate(self["fluid.blocks"]):
             axes = [block["min"][a] + dx * (np.arange(k) + 0.5) for a, k in enumerate(self._lattice_shape(block))]
             parts.append(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, self.dim))
-        return np.concatenate(parts).astype(np.float64 if self["physics.precision"] == "float64" else np.float32)
+            if self["bodies"]:
+                parts[-1] = parts[-1][self._geometry()["keep"][i]]
+        return np.concatenate(parts).astype(self._real)
+
+    def wall_positions(self):
+        """The bodies' wall particles (Adami et al. 2012's dummy particles): positions (N_w, dim) in the scene's
+        precision on the wall lattice domain.box_min + (i + 0.5) dx inside the box, from depth h on each body's
+        solid side to the fluid, whose particles start dx / 2 off the surface (the lattice points between are
+        walls: sphcore.geometry), body by body in lattice order; and each one's body index (N_w,) int32."""
+        if not self["bodies"]:
+            return np.zeros((0, self.dim), self._real), np.zeros(0, np.int32)
+        x, owner = self._geometry()["walls"]
+        return x.astype(self._real), owner.copy()
+
+    @property
+    def _real(self):
+        return np.float64 if self["physics.precision"] == "float64" else np.float32
 
     @property
     def mass(self):

@@ -34,7 +34,8 @@ from sphinx.util.docutils import SphinxDirective
 logger = logging.getLogger(__name__)
 
 KIND_NAMES = {"float": "number", "int": "integer", "vec": "vector", "str": "string", "bool": "boolean",
-              "blocks": "list of boxes", "boxes": "list of boxes", "dt": 'number, "auto" or "adaptive"'}
+              "blocks": "list of boxes", "boxes": "list of boxes", "dt": 'number, "auto" or "adaptive"',
+              "bodies": "list of bodies"}
 
 
 def key_rows(schema=None, prefix=""):
