@@ -737,7 +737,8 @@ class Scene:
                                  f"{deepest + dx * math.sqrt(self.dim) / 2:.3g} m from its surface, less than h / 2 = "
                                  f"{h / 2:g} m (h = fluid.spacing * fluid.smoothing_ratio); make it at least h thick")
         walls = geometry.wall_particles(bodies, lo, hi, dx, h)
-        keep = [geometry.fluid_mask(bodies, b["min"], self._lattice_shape(b), dx) for b in self["fluid.blocks"]]
+        keep = [geometry.fluid_mask(bodies, origin - 0.5 * dx, counts, dx)
+                for origin, counts in map(self._block_lattice, self["fluid.blocks"])]
         self._made = {"key": key, "bodies": bodies, "walls": walls, "keep": keep}
         return self._made
 
@@ -760,7 +761,8 @@ class Scene:
                 raise SceneError(f"domain.obstacles[{k}]: {box} is not inside the box domain.box_min .. "
                                  f"domain.box_max = {lo} .. {hi}")
             for i, block in enumerate(self["fluid.blocks"]):
-                axes = [block["min"][a] + dx * (np.arange(n) + 0.5) for a, n in enumerate(self._lattice_shape(block))]
+                origin, counts = self._block_lattice(block)
+                axes = [origin[a] + dx * np.arange(n) for a, n in enumerate(counts)]
                 if all(((x > box["min"][a]) & (x < box["max"][a])).any() for a, x in enumerate(axes)):
                     raise SceneError(f"fluid.blocks[{i}] = {block}: particles would start inside domain.obstacles[{k}] = "
                                      f"{box}; shrink the block or move the obstacle")
@@ -861,14 +863,28 @@ class Scene:
         dx = self["fluid.spacing"]
         return [int(math.floor((block["max"][a] - block["min"][a]) / dx + 1e-6)) for a in range(len(block["min"]))]
 
+    def _block_lattice(self, block):
+        """A fluid block's lattice: (its first point, its points per axis). The cell centres block.min + (i + 0.5) dx;
+        where the scene has bodies, the wall lattice's points in the block (domain.box_min + (i + 0.5) dx, strictly
+        inside it: fluid and walls on one lattice, as DualSPHysics' GenCase makes them; a fluid particle would
+        otherwise start a fraction of dx from a wall particle)."""
+        dx = self["fluid.spacing"]
+        if not self["bodies"]:
+            return np.asarray(block["min"], np.float64) + 0.5 * dx, self._lattice_shape(block)
+        origin = geometry.box_lattice(self["domain.box_min"], self["domain.box_max"], dx)[0]
+        first = np.ceil((np.asarray(block["min"]) - origin) / dx - 1e-6)
+        last = np.floor((np.asarray(block["max"]) - origin) / dx + 1e-6)
+        return origin + dx * first, np.maximum(last - first + 1, 0).astype(int).tolist()
+
     def initial_positions(self):
         """Fluid particles at cell centres of a square (cubic) lattice filling each block, where the scene has
-        bodies only those at least dx / 2 off every body on its fluid side (sphcore.geometry), (N, dim), in the
-        scene's precision."""
+        bodies on the wall lattice (_block_lattice) and only those at least dx / 2 off every body on its fluid side
+        (sphcore.geometry), (N, dim), in the scene's precision."""
         dx = self["fluid.spacing"]
         parts = []
         for i, block in enumerate(self["fluid.blocks"]):
-            axes = [block["min"][a] + dx * (np.arange(k) + 0.5) for a, k in enumerate(self._lattice_shape(block))]
+            origin, counts = self._block_lattice(block)
+            axes = [origin[a] + dx * np.arange(k) for a, k in enumerate(counts)]
             parts.append(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, self.dim))
             if self["bodies"]:
                 parts[-1] = parts[-1][self._geometry()["keep"][i]]
@@ -979,10 +995,6 @@ class Scene:
                              f"{list_width(self.max_neighbours)} slots each need more; set physics.list_skin = 0")
         return spec._replace(LIST_BY_PARTICLE=backend == "numba" and listed,
                              LIST_CHUNKS=backend == "vulkan" and listed and not spec.DFSPH)
-
-    def wall_positions(self):
-        """The bodies' wall particles: (positions (N_w, dim), body index (N_w,))."""
-        return np.zeros((0, self.dim), self.initial_positions().dtype), np.zeros(0, np.int32)
 
     def params(self, n, fluid_count=None):
         """The folded parameter block for n particles, the first `fluid_count` (default all) the fluid's
