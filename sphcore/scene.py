@@ -19,6 +19,8 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from sphcore.errors import SceneError  # noqa: F401 (sphcore.scene.SceneError)
+from sphcore.gauges import check_scene as check_gauge_places
+from sphcore.gauges import check_shape as check_gauges
 from sphcore.params import CELL_PADDING, KERNELS, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
 from sphcore.paths import SCENE_DIR
 
@@ -236,6 +238,10 @@ SCHEMA = {
         "checkpoint_every": Key(1000, "steps", 1, 1e9, "steps between checkpoints (what `sphcore run --resume` "
                                 "continues from)", "int"),
     },
+    "gauges": Key([], "", 0, 0, "measurements taken on the device every `interval` seconds and written to "
+                  "RUN/gauges/NAME.csv: [[gauges]] tables of name, quantity (pressure|velocity|density|height|force|"
+                  "moment), at (a point; height: the foot of a vertical line), body and about (force, moment), "
+                  "interval [s] (docs/scenes.md: Gauges)", "gauges"),
 }
 
 MAX_PARTICLES = 50_000_000
@@ -267,6 +273,8 @@ def _check(where, key, value):
         if value not in key.kind.split("|"):
             raise SceneError(f"{where} = {_shown(value)}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
         return value
+    if key.kind == "gauges":
+        return check_gauges(where, value)
     if key.kind == "dt" and value in ("auto", "adaptive"):
         return value
     if key.kind == "bool":
@@ -587,6 +595,9 @@ class Scene:
                              f"(at most {MAX_CELLS}); shrink the box (domain.box_min, domain.box_max) or raise "
                              "fluid.spacing")
         self._check_numbers(int(count))
+        # (bodies: the names of the scene's [[bodies]], where the scene has that key)
+        check_gauge_places(self.config.get("gauges", []), dim, lo, hi,
+                           [b.get("name") for b in self.config.get("bodies", []) if isinstance(b, dict)])
 
     def _check_obstacles(self):
         """Obstacles: at most MAX_OBSTACLES, inside the box, and no particle of a block starting
@@ -834,6 +845,7 @@ def describe_schema(schema=SCHEMA, prefix=""):
         if isinstance(key, dict):
             lines += describe_schema(key, f"{path}.")
         else:
-            span = key.kind if "|" in key.kind else "" if key.kind in ("str", "bool") else f"[{key.low:g}, {key.high:g}]"
+            span = (key.kind if "|" in key.kind else "" if key.kind in ("str", "bool", "gauges")
+                    else f"[{key.low:g}, {key.high:g}]")
             lines.append(f"{path:24} {json.dumps(key.default):>12}  {key.unit:8} {span:18} {key.doc}{preset_note(path)}")
     return lines

@@ -9,7 +9,7 @@ import threading
 
 import numpy as np
 
-from sphcore import folder, health, memory
+from sphcore import folder, gauges, health, memory
 from sphcore.backends import check_options, make_backend
 from sphcore.checkpoint import CARRIED
 from sphcore.errors import CheckpointError, SimulationError
@@ -103,8 +103,11 @@ class Simulation:
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n)
         self.spec = scene.spec_for(backend)  # (neighbour lists with the state equation too, where they fit)
+        gauge_table = gauges.table(scene)  # (the scene's [[gauges]], or None)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
-                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS)
+                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS, gauge_table)
+        self.gauges = None if gauge_table is None else gauges.GaugeReader(scene, gauge_table[1])
+        self.gauge_rows = []  # the samples read from the device and not yet taken (take_gauge_rows)
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
         self.solver = solver_for(scene)  # what the pressure solver adds to the step (sphcore.solvers)
@@ -159,6 +162,11 @@ class Simulation:
         with HeldInterrupt() as held:
             while self.step_count < end and held.received is None:
                 k = min(chunk, end - self.step_count, every - (self.step_count - collected))
+                if self.gauges is not None:  # (the gauges' rings are read before a chunk could fill them)
+                    if self.gauges.since + k > gauges.GAUGE_SLOTS:
+                        self.read_gauges()
+                    k = min(k, gauges.GAUGE_SLOTS - self.gauges.since)
+                    self.gauges.since += k
                 self.backend.step(k)
                 self.step_count += k
                 if self.step_count - collected == every or self.step_count == end or held.received is not None:
@@ -167,6 +175,21 @@ class Simulation:
         if held.received is not None:
             raise KeyboardInterrupt(f"stopped after step {self.step_count} ({self.step_count - (end - steps)} of "
                                     f"the {steps} asked for)")
+
+    @_exclusive
+    def read_gauges(self):
+        """Read the samples the gauges took since the last read from the device into gauge_rows."""
+        if self.gauges is not None:
+            rows = self.gauges.read(self.backend)
+            self.gauge_rows = rows if not self.gauge_rows else [np.concatenate(p) for p in zip(self.gauge_rows, rows)]
+
+    @_exclusive
+    def take_gauge_rows(self):
+        """The samples of each gauge (scene [[gauges]]) since the last call: a list, one array (rows, time and the
+        quantity's components) a gauge, in the order of the scene's gauges; [] without gauges."""
+        self.read_gauges()
+        rows, self.gauge_rows = self.gauge_rows, []
+        return rows
 
     @_exclusive
     def read(self):
@@ -235,6 +258,8 @@ class Simulation:
                       scene=np.array(self.scene.to_json()),
                       params=self.params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
         arrays.update(self.solver.checkpoint_arrays())
+        if self.gauges is not None:  # the samples taken so far and each gauge's next time (a resume's rows)
+            arrays["gauge_state"] = self.backend.read_buffer("gauge_state")
         return arrays
 
     @_exclusive
@@ -258,6 +283,14 @@ class Simulation:
                 raise CheckpointError(f"checkpoint buffer {name} is {values.dtype}{list(values.shape)}, this scene "
                                       f"needs {current[name].dtype}{list(current[name].shape)}")
             self.backend.write_buffer(name, values)
+        if self.gauges is not None and "gauge_state" in arrays:
+            state = np.asarray(arrays["gauge_state"])
+            current = self.backend.read_buffer("gauge_state")
+            if state.shape != current.shape or state.dtype != current.dtype or (state[::2] != current[::2]).any():
+                raise CheckpointError(f"checkpoint field gauge_state ({state.dtype}{list(state.shape)}) is not of this "
+                                      "scene's gauges")
+            self.backend.write_buffer("gauge_state", state)
+            self.gauges.taken, self.gauges.since, self.gauge_rows = state[1::2, 1].astype(np.int64), 0, []
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
         self.build_lists_next()
