@@ -30,6 +30,8 @@ from sphcore.vk_runner import Context, VulkanError, compile_glsl
 from sphcore.vk_runner.context import STAGING_KEPT
 from sphcore.workgroups import group_count
 
+NAMES = list(BUFFERS)  # binding number = index
+
 def profile_name(stage):
     """A stage's row in a profile: its name, "compute_density (walk)" for the walk of reused lists."""
     return stage.name + (" (walk)" if stage.when == REUSE else "")
@@ -68,13 +70,16 @@ def check_neighbours(state, spec):
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 
-def dispatch_size(stage, params):
-    """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds (or one)."""
+def dispatch_size(stage, params, gauges=1):
+    """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds (or one, or one per
+    gauge of the `gauges`)."""
     kind = STAGES[stage.name][1]
     if kind == "particles":
         return int(params[0]["n"])
     if kind == "one":
         return 1
+    if kind == "gauges":
+        return gauges
     cells = int(params[0]["cell_total"])
     if kind == "cells":
         return cells
@@ -147,6 +152,7 @@ class NumbaBackend:
             profile.device = "cpu (numba)"
         self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
+        self.gauges = len(self.state["gauge_state"]) // 2
         self._launch = [(self._launcher(s.name), self._groups(s), stage_params(params, s),
                          [self.state[k] for k in STAGES[s.name][2]], s.when) for s in stages]
 
@@ -161,7 +167,7 @@ class NumbaBackend:
         (as a negative number: -1 - index)."""
         if stage.indirect:
             return -1 - indirect_offset(stage)
-        return group_count(dispatch_size(stage, self.params), self.local_size)
+        return group_count(dispatch_size(stage, self.params, self.gauges), self.local_size)
 
     def _launch_groups(self, groups, when=ALWAYS):
         """A launch's work groups now: none where the stage's `when` does not hold (reused lists: a build or not,
@@ -262,6 +268,7 @@ class VulkanBackend:
             self.ctx.timer(1).free()  # a device without timestamps says so now (VulkanError)
         self.shapes = {}
         self.buffers = {}
+        self.gauges = len(state["gauge_state"]) // 2
         for name in BUFFERS:
             self.shapes[name] = np.shape(state[name])
             self.buffers[name] = self.ctx.buffer(int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize, name)
@@ -285,9 +292,11 @@ class VulkanBackend:
         """The compute pipeline of shader `name`, built on first use with the scene's constants."""
         if name not in self.pipelines:
             spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp", defines=self.defines)
-            pipeline = self.ctx.pipeline(spirv, len(BUFFERS), DISPATCH_DTYPE.itemsize, self.local_size,
+            # the stage's own buffers only, each at its index in BUFFERS (sparse: lavapipe allows 32 a stage)
+            bound = {NAMES.index(b): self.buffers[b] for b in STAGES[name][2]}
+            pipeline = self.ctx.pipeline(spirv, list(bound), DISPATCH_DTYPE.itemsize, self.local_size,
                                          self.spec_values, uniform_binding=PARAMS_BINDING)
-            pipeline.bind([self.buffers[b] for b in BUFFERS], uniform=self.params_buffer)
+            pipeline.bind(bound, uniform=self.params_buffer)
             self.pipelines[name] = pipeline
         return self.pipelines[name]
 
@@ -323,7 +332,8 @@ class VulkanBackend:
                                           4 * indirect_offset(stage), predicate=running)
                 else:
                     rec.dispatch(self.pipelines[stage.name], stage_dispatch(stage),
-                                 dispatch_size(stage, self.params), predicate=running if block == ALWAYS else None)
+                                 dispatch_size(stage, self.params, self.gauges),
+                                 predicate=running if block == ALWAYS else None)
                 # a barrier for the commands too where the next stage (of the step, or of the next step) reads
                 # control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
                 after = rec.stages[(k + 1) % len(rec.stages)]

@@ -86,7 +86,7 @@ def cmd_keys(args):
 
 
 def cmd_plot(args):
-    from sphcore.plot import check_target, plot_state  # (matplotlib: only where a plot is drawn)
+    from sphcore.plot import check_target, plot_gauges, plot_state  # (matplotlib: only where a plot is drawn)
 
     final = Path(args.run_dir) / "final.npz"
     if args.out:  # the picture's path first: a missing folder is its fault, not final.npz's
@@ -96,6 +96,9 @@ def cmd_plot(args):
                          "(a run that stopped early keeps its snapshots, *.vtp)")
     out = plot_state(final, args.out)  # a damaged final.npz or a path it must not write: SceneError
     print(f"wrote {out}")
+    gauges = plot_gauges(args.run_dir)  # (one panel a gauge of RUN_DIR/gauges/*.csv, where the scene has gauges)
+    if gauges is not None:
+        print(f"wrote {gauges}")
 
 
 def cmd_render(args):
@@ -145,7 +148,7 @@ def main(argv=None):
     p = sub.add_parser("keys", help="list every scene key with its default, unit and range")
     p.add_argument("section", nargs="?", help="only this table's keys (physics, domain, fluid, forces, walls, time)")
     p.set_defaults(func=cmd_keys)
-    p = sub.add_parser("plot", help="draw RUN_DIR/final.npz as a PNG")
+    p = sub.add_parser("plot", help="draw RUN_DIR/final.npz as a PNG, and the gauges (RUN_DIR/gauges/*.csv) to RUN_DIR/gauges.png")
     p.add_argument("run_dir")
     p.add_argument("--out", help="PNG path (default: RUN_DIR/final.png)")
     p.set_defaults(func=cmd_plot)

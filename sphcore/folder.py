@@ -8,8 +8,8 @@ removed.
 - The manifest, DIR/sphcore-run.json, lists every file a run (and `sphcore plot`, `--profile`)
   wrote there; it is rewritten (atomically) before each new file is written, so it never misses
   one. The names a run writes: scene.json, checkpoint.npz, final.npz, walls.vtp (the bodies' wall particles),
-  NAME.pvd, NAME_NNNNNNN.vtp
-  (NAME: the scene's name), profile.json, and `sphcore plot`'s final.png.
+  NAME.pvd, NAME_NNNNNNN.vtp (NAME: the scene's name), profile.json, gauges/NAME.csv (NAME: a gauge's), and
+  `sphcore plot`'s final.png and gauges.png.
 - A file in the way, one of those names that no manifest lists (the user's own scene.json, a
   ParaView state NAME.pvd, an experiment's NAME_0000001.vtp), is never replaced or deleted: the
   run is refused naming it, --overwrite included.
@@ -43,17 +43,23 @@ from sphcore.errors import FolderError
 from sphcore.output import atomic_file
 
 MANIFEST = "sphcore-run.json"
+GAUGES = "gauges"  # the gauges' subfolder: gauges/NAME.csv (sphcore.gauges)
 SNAPSHOT = re.compile(r".+_\d{7}\.vtp$")
-RUN_FILES = ("checkpoint.npz", "final.npz", "final.png", "scene.json", "profile.json", "walls.vtp")
+RUN_FILES = ("checkpoint.npz", "final.npz", "final.png", "scene.json", "profile.json", "gauges.png", "walls.vtp")
 TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 # What `--overwrite` deletes (with the manifest's say-so), for `sphcore run --help`
-PATTERNS = "checkpoint.npz, final.npz, final.png, profile.json, scene.json, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp"
+PATTERNS = ("checkpoint.npz, final.npz, final.png, profile.json, scene.json, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp, "
+            "gauges/NAME.csv, gauges.png")
 
 
 def is_run_name(name):
-    """Whether `name` is a file name a run (or plot, or --profile) writes: a plain name, no folder."""
-    return ("/" not in name and "\\" not in name and not name.startswith(".")
-            and (name in RUN_FILES or name.endswith(".pvd") or bool(SNAPSHOT.match(name))))
+    """Whether `name` is a file name a run (or plot, or --profile) writes: a plain name, no folder, or a gauge's
+    gauges/NAME.csv (sphcore.gauges)."""
+    plain = lambda n: "/" not in n and "\\" not in n and not n.startswith(".") and n != ""  # noqa: E731
+    folder, _, rest = name.partition("/")
+    if rest:
+        return folder == GAUGES and rest.endswith(".csv") and plain(rest)
+    return plain(name) and (name in RUN_FILES or name.endswith(".pvd") or bool(SNAPSHOT.match(name)))
 
 
 def names_of_run(scene_name):
@@ -116,7 +122,8 @@ def lock(out_dir):
 
 def remove_stale_temporaries(out_dir):
     """Delete the temporary files of processes that no longer exist (a run killed mid-write)."""
-    for path in Path(out_dir).iterdir():
+    gauges = Path(out_dir) / GAUGES
+    for path in [*Path(out_dir).iterdir(), *(gauges.iterdir() if gauges.is_dir() and not gauges.is_symlink() else ())]:
         m = TEMPORARY.match(path.name)
         if not m or int(m.group(1)) == os.getpid():
             continue
@@ -217,8 +224,25 @@ class RunFolder:
         for old in stale:
             self.remove(old)
         self.claim(name)
-        with atomic_file(name, dir_fd=self.fd, before_rename=self.check) as f:
-            yield f
+        folder, _, base = name.rpartition("/")
+        if not folder:
+            with atomic_file(name, dir_fd=self.fd, before_rename=self.check) as f:
+                yield f
+            return
+        # a gauge's gauges/NAME.csv: through the subfolder's descriptor, opened from the locked folder's
+        with contextlib.suppress(FileExistsError):
+            os.mkdir(folder, dir_fd=self.fd)
+        try:
+            sub = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_NOFOLLOW", 0),
+                          dir_fd=self.fd)
+        except OSError as e:
+            raise FolderError(f"{self.path / folder}: not a folder a run can write its {folder} into ({e.strerror}); "
+                              "move it away, or give another --out") from None
+        try:
+            with atomic_file(base, dir_fd=sub, before_rename=self.check) as f:
+                yield f
+        finally:
+            os.close(sub)
 
     def write_bytes(self, name, data):
         with self.open(name) as f:
@@ -241,7 +265,16 @@ class RunFolder:
 
     def _present(self):
         """Names of the entries in the folder, temporaries and the manifest left out."""
-        return {name for name in os.listdir(self.fd) if name != MANIFEST and not TEMPORARY.match(name)}
+        present = {name for name in os.listdir(self.fd) if name not in (MANIFEST, GAUGES) and not TEMPORARY.match(name)}
+        try:
+            sub = os.open(GAUGES, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_NOFOLLOW", 0),
+                          dir_fd=self.fd)
+        except OSError:
+            return present
+        try:
+            return present | {f"{GAUGES}/{name}" for name in os.listdir(sub) if not TEMPORARY.match(name)}
+        finally:
+            os.close(sub)
 
     def prepare(self, scene_name, resume=False, overwrite=False):
         """Before a run of the scene named `scene_name` writes anything: refuse files in the way and,
@@ -259,7 +292,7 @@ class RunFolder:
                               f"{'them' if len(in_the_way) > 1 else 'it'}), and a run never replaces or deletes "
                               "such files, --overwrite included: move them away, or give another --out")
         if resume:
-            self.stale = ("final.npz", "final.png")
+            self.stale = ("final.npz", "final.png", "gauges.png")
             return
         held = sorted(name for name in self.names if name in present)
         if held and not overwrite:

@@ -5,6 +5,7 @@ binding number = index), the stages with their mirrors and the buffers each bind
 """
 import numpy as np
 
+from sphcore.gauges import GAUGE_SLOTS
 from sphcore.params import MAX_OBSTACLES, pyramid_levels
 from sphcore.solvers import solver_for
 from sphcore.sph.apply_order import apply_order
@@ -24,6 +25,7 @@ from sphcore.sph.integrate import integrate
 from sphcore.sph.integrate_density import integrate_density
 from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
+from sphcore.sph.sample_gauges import sample_gauges
 from sphcore.sph.scatter_particles import scatter_particles
 from sphcore.sph.sort_cells import sort_cells
 from sphcore.sph.wall_pressure import wall_pressure
@@ -67,6 +69,9 @@ BUFFERS = {
     "neighbours": (np.uint32, 1, "neighbours"),
     "neighbour_count": (np.uint32, 1, "particles"),
     "neighbour_gradients": (REAL, 4, "gradients"),
+    "gauge_table": (np.float32, 4, "gauge_rows"),
+    "gauge_state": (np.uint32, 4, "gauge_rows"),
+    "gauge_samples": (REAL, 4, "gauge_samples"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -89,11 +94,18 @@ BUFFERS = {
 # dt_partial: reduce_dt's largest (|v|^2, |a|^2) per work group (as many as particles: local size 1).
 # grid_status: [0] particles found outside the grid's range, [1] the lowest id among them,
 # [2] steps whose pyramid total differed from n. Cleared by the host, accumulated by the shaders.
+# gauge_table, gauge_state: two rows per gauge of the scene's [[gauges]] (sphcore.gauges.table;
+# shaders/sph/sample_gauges.comp): gauge_table (the point, the interval), (about or the height's step, the mass);
+# gauge_state (quantity, the body's first id or a height's axis, the body's count, the ring's size GAUGE_SLOTS),
+# (the next multiple of the interval, samples taken); gauge_samples: GAUGE_SLOTS rows (time, value x, y, z) a gauge,
+# a ring the host reads before it can fill ("gauge_rows": 2 per gauge, "gauge_samples": GAUGE_SLOTS per gauge; at
+# least 1 gauge's: a state without gauges has a gauge_state of zeros, which sample_gauges skips).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
 # spec.OBSTACLES pairs are read (float32, like the parameter block's walls).
 STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
 
-# stage -> (mirror factory, invocations: "particles" | "cells" | "nodes", buffers its shader binds in order)
+# stage -> (mirror factory, invocations: "particles" | "cells" | "nodes" | "one" | "gauges", buffers its shader binds
+# in order; a stage's pipeline binds these only, each at its index in BUFFERS)
 STAGES = {
     "clear_cells": (clear_cells, "cells", ("cell_pyramid",)),
     "count_cells": (count_cells, "particles", ("particle_x", "particle_id", "particle_cell", "particle_slot",
@@ -141,6 +153,9 @@ STAGES = {
                                            "particle_vh", "time_state", "control", "scratch_v", "particle_id")),
     "integrate_density": (integrate_density, "particles", ("particle_rho", "particle_p", "particle_drho",
                                                            "time_state")),
+    "sample_gauges": (sample_gauges, "gauges", ("particle_x", "particle_v", "particle_a", "particle_rho",
+                                                "particle_p", "particle_id", "cell_pyramid", "cell_start",
+                                                "time_state", "gauge_table", "gauge_state", "gauge_samples")),
 }
 
 def neighbour_stages(cell_total):
@@ -173,9 +188,13 @@ def plan(scene):
     spec, solver = scene.spec, solver_for(scene)
     # the pressure solver's stages before the forces, and once the step's dt is known (sphcore.solvers)
     stages = density_stages(scene) + solver.stages_before_forces() + [Stage("compute_forces")]
-    # the step's dt on the device (time.dt = "adaptive"), and the last step's for Verlet
+    # the gauges (scene [[gauges]]): after the forces, before choose_dt, where positions, velocities, densities,
+    # pressures, accelerations and the time in time_state are all of the step's start, t_n
+    gauges = bool(scene.config.get("gauges"))
+    stages += [Stage("sample_gauges")] if gauges else []
+    # the step's dt on the device (time.dt = "adaptive"), and the last step's for Verlet; the time for the gauges
     stages += [Stage("reduce_dt")] if spec.ADAPTIVE_DT else []
-    stages += [Stage("choose_dt")] if spec.ADAPTIVE_DT or spec.VERLET else []
+    stages += [Stage("choose_dt")] if spec.ADAPTIVE_DT or spec.VERLET or gauges else []
     return stages + solver.stages_after_dt() + [Stage("integrate")]
 
 
@@ -187,9 +206,14 @@ def buffer_dtype(name, precision="float32"):
     return np.dtype(precision if dtype == REAL else dtype)
 
 
-def buffer_length(length, params, max_neighbours=0, gradients=False):
+def buffer_length(length, params, max_neighbours=0, gradients=False, gauges=0):
     """Elements of a buffer of BUFFERS' `length` for the parameter block `params` (and the
-    spec.MAX_NEIGHBOURS list slots a particle; `gradients`: DFSPH stores their gradients, spec.GRADIENTS)."""
+    spec.MAX_NEIGHBOURS list slots a particle; `gradients`: DFSPH stores their gradients, spec.GRADIENTS;
+    `gauges`: the scene's gauges)."""
+    if length == "gauge_rows":
+        return 2 * max(1, gauges)
+    if length == "gauge_samples":
+        return GAUGE_SLOTS * max(1, gauges)
     if length == "particles":
         return int(params[0]["n"])
     if length == "neighbours":
@@ -203,18 +227,22 @@ def buffer_length(length, params, max_neighbours=0, gradients=False):
     return length
 
 
-def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gradients=False):
+def empty_state(params, precision="float32", obstacles=(), max_neighbours=0, gradients=False, gauges=None):
     """Zeroed buffers for `params` (ids 0..n-1, grid status cleared), real-valued ones at `precision`,
     neighbour lists of `max_neighbours` slots a particle (a scene's spec.MAX_NEIGHBOURS; with `gradients`,
     spec.GRADIENTS, also room for DFSPH's gradient of each entry),
-    and the box `obstacles` ([{"min": [...], "max": [...]}], a scene's domain.obstacles) in obstacle_box.
+    and the box `obstacles` ([{"min": [...], "max": [...]}], a scene's domain.obstacles) in obstacle_box;
+    `gauges`: (gauge_table, gauge_state) of sphcore.gauges.table, the scene's gauges.
     A box's face that lies on a wall is no face: the box is continued through the wall by the tank's
     size (a box on the floor reaches below it), so that no particle slides between the two on the
     wall, and none inside the box is put back out through the wall (integrate.comp)."""
     state = {}
+    count = 0 if gauges is None else len(gauges[0]) // 2
     for name, (_, c, length) in BUFFERS.items():
-        k = buffer_length(length, params, max_neighbours, gradients)
+        k = buffer_length(length, params, max_neighbours, gradients, count)
         state[name] = np.zeros((k, c) if c > 1 else k, buffer_dtype(name, precision))
+    if gauges is not None:
+        state["gauge_table"][:], state["gauge_state"][:] = gauges
     state["particle_id"][:] = np.arange(len(state["particle_id"]))
     state["grid_status"][:] = STATUS_CLEAR
     state["control"][CONTROL_REBUILD] = 1  # (reused lists, spec.LIST_SKIN: the first step builds them)

@@ -17,6 +17,7 @@ import numpy as np
 
 from sphcore import folder
 from sphcore.errors import SceneError
+from sphcore.gauges import FOLDER, read_csv
 from sphcore.output import atomic_write_bytes
 
 SOFTWARE = "sphcore plot"  # the PNG's Software text: how plot knows a picture of its own
@@ -137,5 +138,45 @@ def plot_state(npz_path, out=None):
         with folder.RunFolder(out.parent) as run_folder:
             run_folder.write_bytes(out.name, buf.getvalue())
     else:
+        atomic_write_bytes(out, buf.getvalue())
+    return out
+
+
+def plot_gauges(run_dir):
+    """Draw the gauges of the run in `run_dir` (RUN/gauges/*.csv, sphcore.gauges) to RUN/gauges.png, one panel a
+    gauge (each component against time); return its path, or None where the run has no gauges. A CSV that is not
+    a gauge's is refused in one line (SceneError)."""
+    run_dir = Path(run_dir)
+    paths = sorted((run_dir / FOLDER).glob("*.csv")) if (run_dir / FOLDER).is_dir() else []
+    if not paths:
+        return None
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(paths), 1, figsize=(7, 2.2 * len(paths) + 0.4), dpi=120, sharex=True, squeeze=False)
+    for ax, path in zip(axes[:, 0], paths):
+        try:
+            header, rows = read_csv(path)
+        except (OSError, ValueError, UnicodeDecodeError) as e:
+            plt.close(fig)
+            raise SceneError(f"{path}: not a gauge's CSV ({str(e)[:80]})") from None
+        if header[0] != "time [s]":
+            plt.close(fig)
+            raise SceneError(f"{path}: not a gauge's CSV (its first column is {header[0][:40]!r}, not 'time [s]')")
+        for k, column in enumerate(header[1:], 1):
+            ax.plot(rows[:, 0], rows[:, k], label=column)
+        ax.set(title=path.stem, ylabel=header[1].split(" ", 1)[-1] if len(header) > 1 else "")
+        ax.legend(loc="best", fontsize="small")
+    axes[-1, 0].set_xlabel("time [s]")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight", metadata={"Software": SOFTWARE})
+    plt.close(fig)
+    out = run_dir / "gauges.png"
+    if (run_dir / folder.MANIFEST).is_file():  # a run's: in its manifest, locked
+        with folder.RunFolder(run_dir) as run_folder:
+            run_folder.write_bytes(out.name, buf.getvalue())
+    else:
+        check_target(out)
         atomic_write_bytes(out, buf.getvalue())
     return out

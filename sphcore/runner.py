@@ -23,6 +23,7 @@ from sphcore import folder, memory
 from sphcore.backends import check_options
 from sphcore.checkpoint import CARRIED, CHECKPOINT, MAX_STEP, read_checked, read_scene
 from sphcore.errors import CheckpointError, CheckpointFieldError, Interrupted, SimulationError, VulkanError
+from sphcore.gauges import GaugeFiles
 from sphcore.output import SnapshotSeries, vtp_bytes
 from sphcore.scene import Scene, read_limited
 from sphcore.signals import Signals
@@ -106,14 +107,22 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
             raise SimulationError(f"out of memory while starting the run ({e}); nothing to resume") from None
         signals.poll()
         saved = None  # the step of the last checkpoint written or resumed from
+        files = None  # the gauges' CSV files (scene [[gauges]])
+
+        def write_gauges():
+            if files is not None:
+                files.add(sim.take_gauge_rows())
+                files.write()
 
         def snapshot(state):
+            write_gauges()
             series.add(sim.step_count, sim.time, state["particle_x"], {
                 "velocity": state["particle_v"], "density": state["particle_rho"],
                 "pressure": state["particle_p"]})
 
         def save_checkpoint():
             nonlocal saved
+            write_gauges()  # (before the checkpoint: a resume keeps the rows it counted, and drops any later)
             run_folder.savez(CHECKPOINT, **sim.checkpoint())
             saved = sim.step_count
 
@@ -123,6 +132,10 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
                 saved = sim.step_count
                 series.truncate(sim.step_count)  # snapshots past the checkpoint: of steps that will run again
                 note_resume(checkpoint, sim, out_dir)
+            if sim.gauges is not None:  # (resumed: the rows the checkpoint counted are kept, later ones dropped)
+                taken = checkpoint["gauge_state"][1::2, 1] if checkpoint is not None and "gauge_state" in checkpoint \
+                    else None
+                files = GaugeFiles(run_folder, scene, taken)
             state = sim.read()
             if checkpoint is None and sim.n > sim.fluid_count:  # the bodies' wall particles: fixed, written once
                 run_folder.write_bytes("walls.vtp", vtp_bytes(sim.walls["particle_x"], {"body": sim.walls["body"]}))
@@ -150,6 +163,7 @@ def run(scene, backend="numba", steps=None, out_dir=None, progress=True, checkpo
                     raise Interrupted(signals.received, f"interrupted by {signal.Signals(signals.received).name} "
                                       f"at step {sim.step_count} {schedule.of(sim)}; checkpoint written: continue "
                                       f"with `sphcore run --resume {out_dir}`")
+            write_gauges()
             arrays = final_arrays(sim, state)
             run_folder.savez("final.npz", **arrays)
         except BaseException as e:

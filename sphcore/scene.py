@@ -21,6 +21,8 @@ except ModuleNotFoundError:  # Python 3.10
 
 from sphcore import geometry
 from sphcore.errors import SceneError  # noqa: F401 (sphcore.scene.SceneError)
+from sphcore.gauges import check_scene as check_gauge_places
+from sphcore.gauges import check_shape as check_gauges
 from sphcore.params import CELL_PADDING, KERNELS, MAX_CELLS, MAX_OBSTACLES, Spec, fold_parameters, lattice_mass
 from sphcore.paths import SCENE_DIR
 
@@ -245,6 +247,10 @@ SCHEMA = {
                   "default 0), translate (m, default 0; scale, then rotate, then translate) and fluid (outside: an "
                   "obstacle in the flow, the default; inside: a container holding the fluid). Fluid blocks are clipped "
                   "to dx / 2 off every body (docs/scenes.md, Bodies)", "bodies"),
+    "gauges": Key([], "", 0, 0, "measurements taken on the device every `interval` seconds and written to "
+                  "RUN/gauges/NAME.csv: [[gauges]] tables of name, quantity (pressure|velocity|density|height|force|"
+                  "moment), at (a point; height: the foot of a vertical line), body and about (force, moment), "
+                  "interval [s] (docs/scenes.md: Gauges)", "gauges"),
 }
 
 MAX_PARTICLES = 50_000_000
@@ -276,6 +282,8 @@ def _check(where, key, value):
         if value not in key.kind.split("|"):
             raise SceneError(f"{where} = {_shown(value)}: choose one of {', '.join(map(repr, key.kind.split('|')))}")
         return value
+    if key.kind == "gauges":
+        return check_gauges(where, value)
     if key.kind == "dt" and value in ("auto", "adaptive"):
         return value
     if key.kind == "bool":
@@ -680,6 +688,9 @@ class Scene:
                              f"(at most {MAX_CELLS}); shrink the box (domain.box_min, domain.box_max) or raise "
                              "fluid.spacing")
         self._check_numbers(int(count))
+        # (bodies: the names of the scene's [[bodies]], where the scene has that key)
+        check_gauge_places(self.config.get("gauges", []), dim, lo, hi,
+                           [b.get("name") for b in self.config.get("bodies", []) if isinstance(b, dict)])
 
     def _check_bodies(self):
         """Bodies: their keys against the scene's dimension and model, then the geometry (_geometry: the meshes
@@ -1034,6 +1045,7 @@ def describe_schema(schema=SCHEMA, prefix=""):
         if isinstance(key, dict):
             lines += describe_schema(key, f"{path}.")
         else:
-            span = key.kind if "|" in key.kind else "" if key.kind in ("str", "bool") else f"[{key.low:g}, {key.high:g}]"
+            span = (key.kind if "|" in key.kind else "" if key.kind in ("str", "bool", "gauges")
+                    else f"[{key.low:g}, {key.high:g}]")
             lines.append(f"{path:24} {json.dumps(key.default):>12}  {key.unit:8} {span:18} {key.doc}{preset_note(path)}")
     return lines

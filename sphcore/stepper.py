@@ -9,7 +9,7 @@ import threading
 
 import numpy as np
 
-from sphcore import folder, health, memory
+from sphcore import folder, gauges, health, memory
 from sphcore.backends import check_options, make_backend
 from sphcore.checkpoint import CARRIED
 from sphcore.errors import CheckpointError, SimulationError
@@ -99,16 +99,25 @@ class Simulation:
             backend_options.setdefault("before_allocating",
                                        lambda ctx: memory.check(scene, backend, ctx.device_type == "CPU"))
         self.scene = scene
-        # the fluid's particles, then the bodies' wall particles (fixed: ids fluid_count and up)
+        # the fluid's particles, then the bodies' wall particles, body by body (fixed: ids fluid_count and up)
         x0 = scene.initial_positions()
         walls, self.wall_body = scene.wall_positions()
+        order = np.argsort(self.wall_body, kind="stable")
+        walls, self.wall_body = walls[order], self.wall_body[order]
         self.fluid_count = len(x0)
         x0 = np.concatenate([x0, walls]).astype(x0.dtype)
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n, self.fluid_count)
         self.spec = scene.spec_for(backend)  # (neighbour lists with the state equation too, where they fit)
+        counts = np.bincount(self.wall_body, minlength=len(scene.bodies)).tolist()
+        firsts = (self.fluid_count + np.cumsum([0] + counts[:-1])).tolist()
+        self.body_ids = {body.name: (first, count, body.centroid)  # each body's ids: first, count; its centre
+                         for body, first, count in zip(scene.bodies, firsts, counts)}
+        gauge_table = gauges.table(scene, self.body_ids)  # (the scene's [[gauges]], or None)
         state = empty_state(self.params, scene["physics.precision"], scene["domain.obstacles"],
-                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS)
+                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS, gauge_table)
+        self.gauges = None if gauge_table is None else gauges.GaugeReader(scene, gauge_table[1])
+        self.gauge_rows = []  # the samples read from the device and not yet taken (take_gauge_rows)
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
         state["particle_rho"][self.fluid_count:] = scene["fluid.rest_density"]  # (wall_pressure sets the walls')
@@ -164,6 +173,11 @@ class Simulation:
         with HeldInterrupt() as held:
             while self.step_count < end and held.received is None:
                 k = min(chunk, end - self.step_count, every - (self.step_count - collected))
+                if self.gauges is not None:  # (the gauges' rings are read before a chunk could fill them)
+                    if self.gauges.since + k > gauges.GAUGE_SLOTS:
+                        self.read_gauges()
+                    k = min(k, gauges.GAUGE_SLOTS - self.gauges.since)
+                    self.gauges.since += k
                 self.backend.step(k)
                 self.step_count += k
                 if self.step_count - collected == every or self.step_count == end or held.received is not None:
@@ -172,6 +186,21 @@ class Simulation:
         if held.received is not None:
             raise KeyboardInterrupt(f"stopped after step {self.step_count} ({self.step_count - (end - steps)} of "
                                     f"the {steps} asked for)")
+
+    @_exclusive
+    def read_gauges(self):
+        """Read the samples the gauges took since the last read from the device into gauge_rows."""
+        if self.gauges is not None:
+            rows = self.gauges.read(self.backend)
+            self.gauge_rows = rows if not self.gauge_rows else [np.concatenate(p) for p in zip(self.gauge_rows, rows)]
+
+    @_exclusive
+    def take_gauge_rows(self):
+        """The samples of each gauge (scene [[gauges]]) since the last call: a list, one array (rows, time and the
+        quantity's components) a gauge, in the order of the scene's gauges; [] without gauges."""
+        self.read_gauges()
+        rows, self.gauge_rows = self.gauge_rows, []
+        return rows
 
     @_exclusive
     def read(self):
@@ -243,6 +272,8 @@ class Simulation:
                       scene=np.array(self.scene.to_json()),
                       params=self.params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
         arrays.update(self.solver.checkpoint_arrays())
+        if self.gauges is not None:  # the samples taken so far and each gauge's next time (a resume's rows)
+            arrays["gauge_state"] = self.backend.read_buffer("gauge_state")
         return arrays
 
     @_exclusive
@@ -266,6 +297,14 @@ class Simulation:
                 raise CheckpointError(f"checkpoint buffer {name} is {values.dtype}{list(values.shape)}, this scene "
                                       f"needs {current[name].dtype}{list(current[name].shape)}")
             self.backend.write_buffer(name, values)
+        if self.gauges is not None and "gauge_state" in arrays:
+            state = np.asarray(arrays["gauge_state"])
+            current = self.backend.read_buffer("gauge_state")
+            if state.shape != current.shape or state.dtype != current.dtype or (state[::2] != current[::2]).any():
+                raise CheckpointError(f"checkpoint field gauge_state ({state.dtype}{list(state.shape)}) is not of this "
+                                      "scene's gauges")
+            self.backend.write_buffer("gauge_state", state)
+            self.gauges.taken, self.gauges.since, self.gauge_rows = state[1::2, 1].astype(np.int64), 0, []
         self.step_count = self.checked_step = int(arrays["step"])
         self._carried = None
         self.build_lists_next()

@@ -34,8 +34,8 @@ from sphinx.util.docutils import SphinxDirective
 logger = logging.getLogger(__name__)
 
 KIND_NAMES = {"float": "number", "int": "integer", "vec": "vector", "str": "string", "bool": "boolean",
-              "blocks": "list of boxes", "boxes": "list of boxes", "dt": 'number, "auto" or "adaptive"',
-              "bodies": "list of bodies"}
+              "blocks": "list of boxes", "boxes": "list of boxes", "gauges": "list of [[gauges]] tables",
+              "dt": 'number, "auto" or "adaptive"', "bodies": "list of bodies"}
 
 
 def key_rows(schema=None, prefix=""):
@@ -50,7 +50,7 @@ def key_rows(schema=None, prefix=""):
             rows += key_rows(key, f"{prefix}{name}.")
             continue
         choice = "|" in key.kind
-        span = (" | ".join(key.kind.split("|")) if choice else "" if key.kind in ("str", "bool")
+        span = (" | ".join(key.kind.split("|")) if choice else "" if key.kind in ("str", "bool", "gauges")
                 else f"[{key.low:g}, {key.high:g}]")
         kind = "choice" if choice else KIND_NAMES.get(key.kind, key.kind)
         section = prefix.rstrip(".") or "(top level)"

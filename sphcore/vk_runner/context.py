@@ -106,18 +106,21 @@ class _Staging(Buffer):
 
 
 class Pipeline:
-    """A compute pipeline over `n_bindings` storage buffers (bindings 0, 1, ...), a uniform buffer at
+    """A compute pipeline over storage buffers at the binding numbers `bindings` (a count n: bindings 0 .. n-1;
+    else the numbers, which may be sparse: a stage's own buffers, plan.STAGES), a uniform buffer at
     `uniform_binding` if given, and one push-constant range."""
 
-    def __init__(self, ctx, spirv, n_bindings, push_size, local_size, spec_values=(), uniform_binding=None):
+    def __init__(self, ctx, spirv, bindings, push_size, local_size, spec_values=(), uniform_binding=None):
         vk = ctx.vk
         self.ctx, self.local_size, self.push_size = ctx, local_size, push_size
         self.spec_values, self.uniform_binding = list(spec_values), uniform_binding
-        if uniform_binding is not None and uniform_binding < n_bindings:
-            raise ValueError(f"uniform binding {uniform_binding} is among the {n_bindings} storage buffers' bindings")
+        self.numbers = list(range(bindings)) if isinstance(bindings, int) else sorted(set(bindings))
+        n_bindings = len(self.numbers)
+        if uniform_binding is not None and uniform_binding in self.numbers:
+            raise ValueError(f"uniform binding {uniform_binding} is among the storage buffers' bindings")
         bindings = [vk.VkDescriptorSetLayoutBinding(
             binding=b, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=1,
-            stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT) for b in range(n_bindings)]
+            stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT) for b in self.numbers]
         uniforms = [] if uniform_binding is None else [vk.VkDescriptorSetLayoutBinding(
             binding=uniform_binding, descriptorType=vk.VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, descriptorCount=1,
             stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT)]
@@ -154,9 +157,11 @@ class Pipeline:
             descriptorSetCount=1, pSetLayouts=[self.set_layout]))[0]
 
     def bind(self, buffers, uniform=None):
-        """Bind `buffers` to bindings 0, 1, ... of the descriptor set, and `uniform` to the uniform binding."""
+        """Bind `buffers` (a list: to the pipeline's binding numbers in order; a dict: binding number -> buffer)
+        to the descriptor set, and `uniform` to the uniform binding."""
         vk = self.ctx.vk
-        kinds = [(b, buf, vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER) for b, buf in enumerate(buffers)]
+        pairs = buffers.items() if isinstance(buffers, dict) else zip(self.numbers, buffers)
+        kinds = [(b, buf, vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER) for b, buf in pairs]
         if uniform is not None:
             kinds.append((self.uniform_binding, uniform, vk.VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER))
         writes = [vk.VkWriteDescriptorSet(
@@ -558,8 +563,8 @@ class Context:
     def buffer(self, nbytes, name="buffer", uniform=False):
         return Buffer(self, nbytes, name, uniform)
 
-    def pipeline(self, spirv, n_bindings, push_size, local_size=128, spec_values=(), uniform_binding=None):
-        return Pipeline(self, spirv, n_bindings, push_size, local_size, spec_values, uniform_binding)
+    def pipeline(self, spirv, bindings, push_size, local_size=128, spec_values=(), uniform_binding=None):
+        return Pipeline(self, spirv, bindings, push_size, local_size, spec_values, uniform_binding)
 
     def record(self, secondary=False):
         return Recording(self, secondary)

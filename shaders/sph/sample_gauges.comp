@@ -1,0 +1,152 @@
+#version 460
+// The scene's gauges ([[gauges]], sphcore/gauges.py), one invocation per gauge, in the plan after compute_forces
+// and before choose_dt: positions, velocities, densities, pressures and accelerations are then all of the step's
+// start, and so is the time in time_state (hi + lo: this step's choose_dt has not added its dt yet). A gauge takes
+// a sample at the first step whose time is at or past its next multiple of its interval (within runner.ROUNDING,
+// as the snapshots), and nothing else: a step with no sample due costs one comparison a gauge.
+//   pressure, velocity, density at a point x: the Shepard-normalised SPH interpolation over the fluid within h,
+//     q(x) = sum_j q_j V_j W(x - x_j) / sum_j V_j W(x - x_j), V_j = m / rho_j (DualSPHysics' MeasureTool and
+//     GaugeVel; Shepard 1968); mirror images across the walls are left out (the normalisation makes up for the
+//     missing half of the support at a wall). No fluid within h: 0.
+//   height: the free-surface elevation above the foot x on the vertical line (DualSPHysics' GaugeSwl; the axis
+//     gravity points along, gauge_state's second word, upward toward the box's top): the kernel-weighted mass sum m sum_j W is evaluated every `step` (gauge_table's second row, dx / 2)
+//     from the foot to the box's top, and the surface is the highest point where it falls below rest_density / 2,
+//     interpolated linearly between the two points around it; 0 where no point reaches it.
+//   force, moment on a body: F = m sum a_j over the body's particles (ids [first, first + count), after
+//     compute_forces particle_a holds the fluid's force on them per unit mass), M = sum (x_j - about) x (m a_j);
+//     one invocation sums them in the particles' order in the buffers (the same on both backends): the same bits
+//     every run.
+// A sample is the row (time, value x, y, z) at slot `taken` mod GAUGE_SLOTS of the gauge's ring in gauge_samples,
+// which the host reads before it can fill (sphcore.gauges.GaugeReader). Layouts: sphcore/plan.py (BUFFERS).
+// Mirror: sphcore/sph/sample_gauges.py (same names, same statement order, same step labels).
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x_id = 0) in;
+#include "params.glsl"
+#include "constants.glsl"
+#include "real.glsl"
+#include "cells.glsl"
+#include "kernels.glsl"
+
+layout(std430, binding = 0) readonly buffer ParticleX { real4 particle_x[]; };
+layout(std430, binding = 1) readonly buffer ParticleV { real4 particle_v[]; };
+layout(std430, binding = 2) readonly buffer ParticleA { real4 particle_a[]; };
+layout(std430, binding = 3) readonly buffer ParticleRho { real particle_rho[]; };
+layout(std430, binding = 4) readonly buffer ParticleP { real particle_p[]; };
+layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; };
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
+layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
+layout(std430, binding = 32) readonly buffer GaugeTable { vec4 gauge_table[]; };
+layout(std430, binding = 33) buffer GaugeState { uvec4 gauge_state[]; };
+layout(std430, binding = 34) writeonly buffer GaugeSamples { real4 gauge_samples[]; };
+
+const uint PRESSURE = 0u;  // sphcore.gauges.QUANTITIES
+const uint VELOCITY = 1u;
+const uint DENSITY = 2u;
+const uint HEIGHT = 3u;
+const uint FORCE = 4u;
+const uint MOMENT = 5u;
+
+// Whether time t is at or past `target`, within 1e-6 of it (runner.reached: n dt in float32 falls short of a decimal
+// time by its rounding); `precise`: no contraction, the same bits as the mirror.
+bool reached(float t, float target) {
+    precise float least = target - 1e-6 * target;
+    return t >= least;
+}
+
+// Sums over the fluid within h of point x: (sum V W, sum V W p, sum V W rho, sum W) and sum V W v, V W in units of
+// m times W's coefficient (which the normalisation cancels).
+real4 point_sums(real3 x, out real3 sum_v) {
+    real4 sums = real4(0.0);
+    sum_v = real3(0.0);
+    ivec3 base = cell_of(x);
+    for (uint k = 0u; k < range_count(); ++k) {
+        uint start = 0u;
+        uint end = P.n;
+        if (GRID) {
+            int first;
+            int last;
+            if (!range_cells(base, k, first, last)) continue;
+            start = cell_start[first];
+            end = cell_start[last] + cell_pyramid[last];
+        }
+        for (uint j = start; j < end; ++j) {
+            real3 r = x - particle_x[j].xyz;
+            real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+            if (r2 >= P.h2) continue;
+            real w = kernel_w(r2);
+            real vw = w / particle_rho[j];
+            sums += real4(vw, vw * particle_p[j], vw * particle_rho[j], w);
+            sum_v += vw * particle_v[j].xyz;
+        }
+    }
+    return sums;
+}
+
+// The free surface's elevation above foot x on the vertical line, along axis `up` (0 where the mass sum never
+// reaches rho_0 / 2).
+real surface_height(real3 x, real step, uint up) {
+    real x_up = x[up];
+    real half_rest = real(0.5) * real(P.rest_density);
+    real top = real(P.box_max[up]);
+    real height = real(0.0);
+    real before = real(0.0);
+    real level = x_up;
+    for (uint k = 0u; level <= top; ++k) {
+        real3 at = x;
+        at[up] = level;
+        real3 sum_v;
+        real mass = real(P.density_coef) * point_sums(at, sum_v).w;
+        // a fall below half the rest density between the last point and this one: the surface (the highest one)
+        if (k > 0u && before >= half_rest && mass < half_rest)
+            height = level - step + step * (before - half_rest) / (before - mass) - x_up;
+        before = mass;
+        level = x_up + real(k + 1u) * step;
+    }
+    return height;
+}
+
+void main() {
+    // [1] one invocation per gauge
+    uint g = gl_GlobalInvocationID.x;
+    if (g >= uint(gauge_state.length()) / 2u) return;
+    uvec4 kind = gauge_state[2u * g];
+    uvec4 progress = gauge_state[2u * g + 1u];
+    if (kind.w == 0u) return;  // (no gauge: a state without [[gauges]])
+    // [2] due? the time at the step's start against the next multiple of the interval (runner.reached)
+    float t = time_state[0].z + time_state[0].w;
+    float interval = gauge_table[2u * g].w;
+    if (!reached(t, float(progress.x) * interval)) return;
+    // [3] the sample
+    real3 x = real3(gauge_table[2u * g].xyz);
+    real3 aux = real3(gauge_table[2u * g + 1u].xyz);
+    real4 value = real4(0.0);
+    if (kind.x <= DENSITY) {
+        real3 sum_v;
+        real4 sums = point_sums(x, sum_v);
+        if (sums.x > real(0.0)) {
+            if (kind.x == PRESSURE) value.x = sums.y / sums.x;
+            if (kind.x == VELOCITY) value.xyz = sum_v / sums.x;
+            if (kind.x == DENSITY) value.x = sums.z / sums.x;
+        }
+    }
+    if (kind.x == HEIGHT) value.x = surface_height(x, aux.x, kind.y);
+    if (kind.x >= FORCE) {
+        real3 force = real3(0.0);
+        precise real3 moment = real3(0.0);  // (precise: r x a not contracted to fused multiply-adds, as the mirror)
+        for (uint i = 0u; i < P.n; ++i) {
+            if (particle_id[i] - kind.y >= kind.z) continue;  // (not the body's: unsigned, below first too)
+            real3 a = particle_a[i].xyz;
+            real3 r = particle_x[i].xyz - aux;
+            force += a;
+            moment += real3(r.y * a.z - r.z * a.y, r.z * a.x - r.x * a.z, r.x * a.y - r.y * a.x);
+        }
+        real mass = real(gauge_table[2u * g + 1u].w);
+        value.xyz = mass * (kind.x == FORCE ? force : moment);
+    }
+    // [4] store: the row at the ring's next slot, the count, and the next multiple past t
+    gauge_samples[g * kind.w + progress.y % kind.w] = real4(real(time_state[0].z) + real(time_state[0].w), value.xyz);
+    uint next = max(progress.x + 1u, uint(t / interval));
+    while (reached(t, float(next) * interval)) next += 1u;
+    gauge_state[2u * g + 1u] = uvec4(next, progress.y + 1u, 0u, 0u);
+}

@@ -1,0 +1,165 @@
+"""The scene's gauges, one invocation per gauge, after compute_forces and before choose_dt (the state and the
+time of the step's start): a sample at the first step at or past each multiple of a gauge's interval. pressure,
+velocity, density: Shepard-normalised SPH interpolation at a point over the fluid within h (DualSPHysics'
+MeasureTool, GaugeVel), no mirror images; height: where the mass sum along the vertical line falls below
+rho_0 / 2 (DualSPHysics' GaugeSwl); force, moment: m sum a over a body's particles, in buffer order (the shader
+says more).
+
+Mirror of shaders/sph/sample_gauges.comp: same names, same statement order, same step labels. A GLSL vec3
+local `v` is `v_x, v_y, v_z` here; the time's float32 arithmetic is numba's float32, as the shader's.
+"""
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from sphcore.sph.cells import cells
+from sphcore.sph.kernels import kernels
+from sphcore.workgroups import launcher
+
+f32 = np.float32
+PRESSURE, VELOCITY, DENSITY, HEIGHT, FORCE, MOMENT = range(6)  # sphcore.gauges.QUANTITIES
+
+
+@lru_cache(maxsize=None)
+def sample_gauges(spec, real=np.float32):
+    GRID = spec.GRID
+    cell_of = cells(spec, real).cell_of
+    range_count = cells(spec, real).range_count
+    range_cells = cells(spec, real).range_cells
+    kernel_w = kernels(spec, real).kernel_w
+
+    @njit
+    def reached(t, target):
+        """Whether time t is at or past `target`, within 1e-6 of it (runner.reached)."""
+        least = target - f32(1e-6) * target
+        return t >= least
+
+    @njit
+    def point_sums(P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start):
+        """Sums over the fluid within h of point x: (sum V W, sum V W p, sum V W rho, sum W) and sum V W v."""
+        sums_x = sums_y = sums_z = sums_w = real(0.0)
+        sum_v_x = sum_v_y = sum_v_z = real(0.0)
+        base_x, base_y, base_z = cell_of(P, x_x, x_y, x_z)
+        for k in range(range_count()):
+            start = 0
+            end = int(P.n)
+            if GRID:
+                inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                if not inside:
+                    continue
+                start = int(cell_start[first])
+                end = int(cell_start[last]) + int(cell_pyramid[last])
+            for j in range(start, end):
+                r_x = x_x - particle_x[j, 0]
+                r_y = x_y - particle_x[j, 1]
+                r_z = x_z - particle_x[j, 2]
+                r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                if r2 >= P.h2:
+                    continue
+                w = kernel_w(P, r2)
+                vw = w / particle_rho[j]
+                sums_x += vw
+                sums_y += vw * particle_p[j]
+                sums_z += vw * particle_rho[j]
+                sums_w += w
+                sum_v_x += vw * particle_v[j, 0]
+                sum_v_y += vw * particle_v[j, 1]
+                sum_v_z += vw * particle_v[j, 2]
+        return sums_x, sums_y, sums_z, sums_w, sum_v_x, sum_v_y, sum_v_z
+
+    @njit
+    def surface_height(P, x_x, x_y, x_z, step, up, particle_x, particle_v, particle_rho, particle_p, cell_pyramid,
+                       cell_start):
+        """The free surface's elevation above foot x on the vertical line, along axis `up` (0 where the mass sum
+        never reaches rho_0 / 2)."""
+        x_up = x_x if up == 0 else x_y if up == 1 else x_z
+        half_rest = real(0.5) * real(P.rest_density)
+        top = real(P.box_max[up])
+        height = real(0.0)
+        before = real(0.0)
+        level = x_up
+        k = 0
+        while level <= top:
+            at_x, at_y, at_z = x_x, x_y, x_z
+            at_x, at_y, at_z = (level if up == 0 else at_x), (level if up == 1 else at_y), (level if up == 2 else at_z)
+            mass = real(P.density_coef) * point_sums(P, at_x, at_y, at_z, particle_x, particle_v, particle_rho,
+                                                     particle_p, cell_pyramid, cell_start)[3]
+            # a fall below half the rest density between the last point and this one: the surface (the highest one)
+            if k > 0 and before >= half_rest and mass < half_rest:
+                height = level - step + step * (before - half_rest) / (before - mass) - x_up
+            before = mass
+            level = x_up + real(k + 1) * step
+            k += 1
+        return height
+
+    @njit
+    def sample_gauges_main(g, params, particle_x, particle_v, particle_a, particle_rho, particle_p, particle_id,
+                           cell_pyramid, cell_start, time_state, gauge_table, gauge_state, gauge_samples):
+        P = params[0]
+        # [1] one invocation per gauge
+        if g >= len(gauge_state) // 2:
+            return
+        # (a height's axis in place of the body's first id: surface_height)
+        quantity, body_first, body_count, slots = (int(gauge_state[2 * g, 0]), int(gauge_state[2 * g, 1]),
+                                                   int(gauge_state[2 * g, 2]), int(gauge_state[2 * g, 3]))
+        next_multiple, taken = int(gauge_state[2 * g + 1, 0]), int(gauge_state[2 * g + 1, 1])
+        if slots == 0:
+            return  # (no gauge: a state without [[gauges]])
+        # [2] due? the time at the step's start against the next multiple of the interval (runner.reached)
+        t = time_state[0, 2] + time_state[0, 3]
+        interval = gauge_table[2 * g, 3]
+        if not reached(t, f32(next_multiple) * interval):
+            return
+        # [3] the sample
+        x_x, x_y, x_z = real(gauge_table[2 * g, 0]), real(gauge_table[2 * g, 1]), real(gauge_table[2 * g, 2])
+        aux_x, aux_y, aux_z = real(gauge_table[2 * g + 1, 0]), real(gauge_table[2 * g + 1, 1]), \
+            real(gauge_table[2 * g + 1, 2])
+        value_x = value_y = value_z = real(0.0)
+        if quantity <= DENSITY:
+            sums_x, sums_y, sums_z, sums_w, sum_v_x, sum_v_y, sum_v_z = point_sums(
+                P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start)
+            if sums_x > real(0.0):
+                if quantity == PRESSURE:
+                    value_x = sums_y / sums_x
+                if quantity == VELOCITY:
+                    value_x, value_y, value_z = sum_v_x / sums_x, sum_v_y / sums_x, sum_v_z / sums_x
+                if quantity == DENSITY:
+                    value_x = sums_z / sums_x
+        if quantity == HEIGHT:
+            value_x = surface_height(P, x_x, x_y, x_z, aux_x, body_first, particle_x, particle_v, particle_rho, particle_p,
+                                     cell_pyramid, cell_start)
+        if quantity >= FORCE:
+            force_x = force_y = force_z = real(0.0)
+            moment_x = moment_y = moment_z = real(0.0)
+            for i in range(int(P.n)):
+                if (int(particle_id[i]) - body_first) & 0xFFFFFFFF >= body_count:
+                    continue  # (not the body's: unsigned, below first too)
+                a_x, a_y, a_z = particle_a[i, 0], particle_a[i, 1], particle_a[i, 2]
+                r_x, r_y, r_z = particle_x[i, 0] - aux_x, particle_x[i, 1] - aux_y, particle_x[i, 2] - aux_z
+                force_x += a_x
+                force_y += a_y
+                force_z += a_z
+                moment_x += r_y * a_z - r_z * a_y
+                moment_y += r_z * a_x - r_x * a_z
+                moment_z += r_x * a_y - r_y * a_x
+            mass = real(gauge_table[2 * g + 1, 3])
+            if quantity == FORCE:
+                value_x, value_y, value_z = mass * force_x, mass * force_y, mass * force_z
+            else:
+                value_x, value_y, value_z = mass * moment_x, mass * moment_y, mass * moment_z
+        # [4] store: the row at the ring's next slot, the count, and the next multiple past t
+        row = g * slots + taken % slots
+        gauge_samples[row, 0] = real(time_state[0, 2]) + real(time_state[0, 3])
+        gauge_samples[row, 1] = value_x
+        gauge_samples[row, 2] = value_y
+        gauge_samples[row, 3] = value_z
+        following = max(next_multiple + 1, int(t / interval))
+        while reached(t, f32(following) * interval):
+            following += 1
+        gauge_state[2 * g + 1, 0] = following
+        gauge_state[2 * g + 1, 1] = taken + 1
+        gauge_state[2 * g + 1, 2] = 0
+        gauge_state[2 * g + 1, 3] = 0
+
+    return launcher(sample_gauges_main)
