@@ -264,19 +264,34 @@ def _region(body, origin, dx, counts, margin):
     return lo, np.maximum(hi, lo)
 
 
+_RECENT = {}  # the entries _cached read or made last in this process, by path (a sweep makes the same body often)
+
+
+def _remember(path, arrays, keep=32):
+    """`arrays`, kept in _RECENT (the oldest of more than `keep` dropped); their copies' buffers are read-only."""
+    for values in arrays.values():
+        values.flags.writeable = False
+    _RECENT[path] = arrays
+    while len(_RECENT) > keep:
+        _RECENT.pop(next(iter(_RECENT)))
+    return arrays
+
+
 def _cached(kind, body, lattice, compute):
     """compute() -> dict of arrays, kept on disk under cache_dir("geometry") by a hash of `kind`, the
     body's digest and `lattice` (json-able); read back with np.load(allow_pickle=False)."""
     key = hashlib.sha256(json.dumps([CACHE_VERSION, kind, body.digest, lattice]).encode()).hexdigest()
     path = cache_dir("geometry") / f"{kind}-{key[:40]}.npz"
+    if path in _RECENT:
+        return _RECENT[path]
     try:
         with np.load(path, allow_pickle=False) as f:
-            return {name: f[name] for name in f.files}
+            return _remember(path, {name: f[name] for name in f.files})
     except FileNotFoundError:
         pass
     except Exception as e:  # damaged: compute it again and replace it
         warnings.warn(f"geometry cache entry {path} unreadable ({type(e).__name__}); computed again", CacheWarning)
-    arrays = compute()
+    arrays = _remember(path, compute())
     try:
         os.makedirs(path.parent, exist_ok=True)
         atomic_savez(path, **arrays)

@@ -18,6 +18,7 @@ import pytest
 
 from conftest import BACKENDS, VALIDATION, scene_changed, schema_keys, vulkan_or_skip
 from sphcore.backends import in_particle_order
+from sphcore.paths import SCENE_DIR
 from sphcore.scene import SceneError
 from sphcore.simulation import Simulation
 from sphcore.sph.dfsph import (CONTROL_BUILDS, CONTROL_FAILURES, CONTROL_ITERATIONS, CONTROL_OVERFLOW_STEP,
@@ -40,6 +41,7 @@ SWITCHES = {
     "time.integrator": ("symplectic_euler", "verlet"),
     "time.dt": ("auto", "adaptive"),
     "physics.shifting": ("none", "lind"),
+    "bodies": ("none", "obstacle"),
 }
 SEED = 30  # the sample's order of candidates (issue 30)
 SAMPLE_SIZE = 12  # at most; the sample ends once every pair is covered
@@ -49,7 +51,7 @@ ISSUE_30 = {"physics.dimension": 2, "physics.precision": "float32", "physics.ker
             "physics.density": "summation", "physics.density_diffusion": "none", "physics.viscosity_model": "laminar",
             "physics.equation_of_state": "linear", "physics.pressure_solver": "dfsph", "physics.list_skin": 0.0,
             "domain.wall_model": "free_slip", "domain.obstacles": "none", "time.integrator": "symplectic_euler",
-            "time.dt": "auto", "physics.shifting": "none"}
+            "time.dt": "auto", "physics.shifting": "none", "bodies": "none"}
 STEPS = 6
 
 # a water block at rest in a tank, in the tank's corner; the obstacle a box beside it, within h of its particles
@@ -62,6 +64,11 @@ BASE = {
         "forces": {"gravity": [0.0, -9.81, 0.0]}},
 }
 OBSTACLE = {2: {"min": [0.16, 0.0], "max": [0.2, 0.04]}, 3: {"min": [0.14, 0.0, 0.02], "max": [0.18, 0.04, 0.1]}}
+# the body (bodies = "obstacle"): beyond the box obstacle, within h of the particles that flow there; 2D a triangle,
+# 3D SPHERIC test 2's box obstacle (the shipped mesh) scaled to 0.04 x 0.04 x 0.1 m
+BODY = {2: {"name": "wedge", "polygon": [[0.21, 0.0], [0.27, 0.0], [0.21, 0.06]]},
+        3: {"name": "box", "mesh": str(SCENE_DIR / "meshes" / "spheric_box.stl"), "scale": 0.25,
+            "translate": [0.19 - 0.25 * 0.6635, 0.0, 0.01 - 0.25 * 0.2985]}}
 
 # Reals: the mirrors and the shaders sum the same terms in the same order, and on lavapipe every combination
 # measured ends bit for bit equal (benchmarks/results/switch_matrix.json). The tolerance is for what a driver
@@ -93,7 +100,8 @@ def scene_of(combo):
     dim = combo["physics.dimension"]
     changes = dict(combo)
     changes["domain.obstacles"] = [OBSTACLE[dim]] if combo["domain.obstacles"] == "box" else []
-    return scene_changed(BASE[dim], **changes)
+    base = {**BASE[dim], "bodies": [BODY[dim]] if changes.pop("bodies") == "obstacle" else []}
+    return scene_changed(base, **changes)
 
 
 def accepted(combos):
