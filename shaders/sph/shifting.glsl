@@ -24,7 +24,10 @@ real4 shifting_lind(real r2, real rlen, real rhoj, real grad, real3 r_hat) {
     real g = P.pressure_coef / rhoj * grad;
     real ratio = kernel_w(r2) * P.shifting_w;
     real ratio2 = ratio * ratio;
-    real c = -(real(1.0) + real(0.2) * (ratio2 * ratio2)) * g;
+    // `precise` (NoContraction, as dfsph_residual.comp's): unmarked, lavapipe's compiler fused or distributed
+    // 1 + 0.2 ratio^4 with g, the last bit of grad C_i moved, and the backends parted from the second step of a
+    // dam break (tests/test_shifting.py)
+    precise real c = -(real(1.0) + real(0.2) * (ratio2 * ratio2)) * g;
     return real4(c * r_hat, g * rlen);
 }
 

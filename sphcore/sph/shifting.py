@@ -27,6 +27,7 @@ def shifting(spec, real=np.float32):
         g = P.pressure_coef / rhoj * grad
         ratio = kernel_w(P, r2) * P.shifting_w
         ratio2 = ratio * ratio
+        # `precise` in the shader (no contraction): computed as written there, as here
         c = -(real(1.0) + real(0.2) * (ratio2 * ratio2)) * g
         return c * r_hat_x, c * r_hat_y, c * r_hat_z, g * rlen
 
