@@ -4,7 +4,8 @@
 (`particle_surface`: the isosurface of the colour field), and writes next to each other
 <name>_surface_<step>.png and <name>_surface_<step>.vtp (or .ply), the camera fixed for the whole
 run, and <name>_surface.pvd, which gives ParaView each mesh's time. These names never are a run's
-(its snapshots are <name>_<step>.vtp): an out_dir where one would be is refused.
+(its snapshots are <name>_<step>.vtp): an out_dir where one would be is refused. A run with bodies
+has their wall particles in walls.vtp: each picture draws them in grey, about a spacing wide.
 
 Offscreen: with no X display, VTK is pointed at its EGL render window (Mesa's llvmpipe through
 EGL's surfaceless platform: apt packages libegl1, libegl-mesa0, libgl1-mesa-dri; no GPU and no
@@ -33,6 +34,7 @@ if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
 
 BACKGROUND = "white"
 WATER = (0.16, 0.47, 0.80)
+WALL = (0.62, 0.62, 0.62)  # the bodies' wall particles: a neutral grey
 VIEW_ANGLE = 30.0  # degrees, vertical (VTK's default)
 
 
@@ -89,12 +91,13 @@ def box_camera(box_min, box_max, up=(0.0, 1.0, 0.0), aspect=4 / 3, direction=(0.
 
 
 def render_mesh(verts, faces, normals, png_path, particles=None, box=None, camera=None, window_size=(1024, 768),
-                text=None):
+                text=None, walls=None, wall_size=4.0):
     """Draw the surface (verts, faces, normals as from particle_surface / marching_cubes) shaded
-    and lit with its own vertex normals, optionally `particles` (N, 3) as small points, the
-    outline of `box` = (box_min, box_max), and `text` at the top left, from `camera` (pyvista's
-    (position, focal point, view up); None: box_camera of `box`, else fitted to the mesh), and
-    write the screenshot to `png_path` atomically. An empty surface draws the rest.
+    and lit with its own vertex normals, optionally `particles` (N, 3) as small points, `walls` (N, 3)
+    as grey spheres `wall_size` pixels wide, the outline of `box` = (box_min, box_max), and `text`
+    at the top left, from `camera` (pyvista's (position, focal point, view up); None: box_camera
+    of `box`, else fitted to the mesh), and write the screenshot to `png_path` atomically. An
+    empty surface draws the rest.
 
     >>> import os, tempfile, numpy as np, sphcore
     >>> z, y, x = np.mgrid[-1:1:16j, -1:1:16j, -1:1:16j]
@@ -120,6 +123,9 @@ def render_mesh(verts, faces, normals, png_path, particles=None, box=None, camer
         if particles is not None and len(particles):
             pl.add_mesh(pv.PolyData(np.asarray(particles, np.float32)[:, :3]), color=(0.05, 0.15, 0.35),
                         point_size=2.0, render_points_as_spheres=False)
+        if walls is not None and len(walls):
+            pl.add_mesh(pv.PolyData(np.asarray(walls, np.float32)[:, :3]), color=WALL, point_size=float(wall_size),
+                        render_points_as_spheres=True, ambient=0.3, diffuse=0.7)
         if box is not None:
             lo, hi = np.asarray(box[0], float), np.asarray(box[1], float)
             pl.add_mesh(pv.Box(bounds=(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])).outline(),
@@ -271,9 +277,10 @@ def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, parti
     out_dir/NAME_surface_NNNNNNN.png and .vtp or .ply (points, triangles wound outwards, point
     normals "Normals"), from one camera fixed by the scene's box, and (vtp, where the run's .pvd
     gives the snapshots' times) out_dir/NAME_surface.pvd listing each mesh with its time, rewritten
-    after each frame. `spacing` (default h / 2) and `level` go to particle_surface. An out_dir
-    holding a run whose files these names would replace is refused before anything is written.
-    Returns the paths written, in order."""
+    after each frame; the run's walls.vtp (the bodies' wall particles), where there is one, in grey.
+    `spacing` (default h / 2) and `level` go to particle_surface. An out_dir holding a run whose
+    files these names would replace is refused before anything is written. Returns the paths
+    written, in order."""
     if mesh_format not in ("vtp", "ply"):
         raise ValueError(f"mesh_format must be vtp or ply, got {mesh_format!r}")
     if every < 1:
@@ -293,6 +300,12 @@ def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, parti
     up = -gravity / np.linalg.norm(gravity) if np.linalg.norm(gravity) > 0 else (0.0, 1.0, 0.0)
     window = (1024, 768)
     camera = box_camera(*box, up=up, aspect=window[0] / window[1])
+    walls, wall_size = None, 4.0
+    wall_file = Path(run_dir) / "walls.vtp"
+    if wall_file.is_file():  # the bodies' wall particles, fixed: a spacing wide at the box's centre
+        walls = read_positions(wall_file)
+        distance = np.linalg.norm(np.subtract(camera[0], camera[1]))
+        wall_size = max(2.0, scene["fluid.spacing"] / (2 * distance * np.tan(np.radians(VIEW_ANGLE / 2))) * window[1])
     written, entries = [], []
     for path, stem in tqdm(list(zip(snapshots, stems)), unit="frame", disable=not progress, desc=f"render {name}"):
         position = read_positions(path)
@@ -306,7 +319,7 @@ def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, parti
         text = f"{name}  t = {t:.4g} s" if t is not None else f"{name}  {path.stem}"
         written.append(render_mesh(verts, faces, normals, out_dir / f"{stem}.png",
                                    particles=position if particles else None, box=box, camera=camera,
-                                   window_size=window, text=text))
+                                   window_size=window, text=text, walls=walls, wall_size=wall_size))
         if mesh_format == "vtp" and t is not None:
             entries.append((f"{stem}.vtp", t))
             write_pvd(out_dir / series, entries)

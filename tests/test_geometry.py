@@ -19,7 +19,7 @@ pytest.importorskip("shapely")
 from sphcore import geometry  # noqa: E402
 from sphcore.errors import CacheWarning  # noqa: E402
 from sphcore.paths import SCENE_DIR  # noqa: E402
-from sphcore.scene import Scene, SceneError, describe_schema  # noqa: E402
+from sphcore.scene import Scene, SceneError, describe_schema, shipped_scenes  # noqa: E402
 
 MESHES = SCENE_DIR / "meshes"
 SQUARE = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
@@ -284,7 +284,7 @@ mesh = "meshes/box.stl"
 
 def test_shipped_meshes():
     """Closed, small, and the SPHERIC box where the shipped scene's box obstacle is."""
-    for name in ("spheric_box", "cylinder_tank", "wedge"):
+    for name in ("spheric_box", "cylinder_tank", "wedge", "cylinder_pier"):
         path = MESHES / f"{name}.stl"
         assert path.stat().st_size < 200_000, name
         mesh = trimesh.load(path)
@@ -295,6 +295,34 @@ def test_shipped_meshes():
     tank = trimesh.load(MESHES / "cylinder_tank.stl")
     assert 0.99 * math.pi * 0.09 * 0.6 < tank.volume <= math.pi * 0.09 * 0.6  # an inscribed 48-gon
     assert np.allclose(tank.bounds, [[-0.3, 0.0, -0.3], [0.3, 0.6, 0.3]], atol=1e-6)
+
+
+def test_shipped_scene_with_a_mesh():
+    """dam_break_obstacle_3d: the pier stands where its comments say, clear of the column, and its gauges sit
+    where they say: the pressure on the pier's face toward the water, the height in front of it, in the fluid."""
+    scene = Scene.load("dam_break_obstacle_3d")
+    pier = trimesh.load(MESHES / "cylinder_pier.stl")
+    assert 0.99 * math.pi * 0.045**2 * 0.3 < pier.volume <= math.pi * 0.045**2 * 0.3  # an inscribed 32-gon
+    pier.apply_translation(scene["bodies"][0]["translate"])
+    assert np.allclose(pier.bounds, [[0.555, 0.0, 0.105], [0.645, 0.3, 0.195]], atol=1e-6)
+    fluid = scene.initial_positions()
+    assert len(fluid) == 20 * 20 * 20 and fluid[:, 0].max() < 0.3  # the whole column, untouched by the clipping
+    walls, body = scene.wall_positions()
+    assert len(walls) > 0 and np.all(body == 0)
+    assert np.all(np.abs(walls[:, [0, 2]].mean(axis=0) - [0.6, 0.15]) < 1e-6)  # symmetric about the pier's axis
+    gauges = {g["name"]: g for g in scene["gauges"]}
+    assert [gauges[n]["quantity"] for n in ("p_pier", "h_front", "f_pier")] == ["pressure", "height", "force"]
+    assert abs(trimesh.proximity.signed_distance(pier, [gauges["p_pier"]["at"]])[0]) < 1e-6  # on the face
+    assert gauges["p_pier"]["at"][0] < 0.6  # on the side toward the water (x < the axis)
+    assert 0.3 < gauges["h_front"]["at"][0] < 0.555 and gauges["h_front"]["at"][2] == 0.15
+    assert gauges["f_pier"]["body"] == "pier"
+
+
+def test_every_shipped_scene_loads():
+    names = shipped_scenes()
+    assert {"dam_break_3d", "dam_break_obstacle_3d", "spheric_test2"} <= set(names)
+    for name in names:
+        assert Scene.load(name)["name"] == name
 
 
 def test_sphcore_keys_lists_bodies():

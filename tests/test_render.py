@@ -218,6 +218,58 @@ def test_render_run_empty_surface(droplet_run, tmp_path):
     assert 0 < foreground(read_png(written[1])).mean() < 0.05
 
 
+def test_render_draws_the_bodies_wall_particles(droplet_run, tmp_path):
+    """A run's walls.vtp (as `sphcore run` writes it for bodies) is drawn in grey where its points are,
+    in every picture; without it the picture has no grey there."""
+    import shutil
+
+    from sphcore.output import vtp_bytes
+
+    run = tmp_path / "run"
+    shutil.copytree(droplet_run, run, ignore=shutil.ignore_patterns("frames"))
+    plain = foreground(read_png(render_run(run, tmp_path / "plain", every=2, progress=False)[1]))
+    # a block of 5 x 5 x 5 points at spacing 0.01 in the box's corner x, y low and z high, clear of the droplet
+    g = (np.arange(5) + 0.5) * 0.01
+    block = np.array([[x, y, 0.25 + z] for x in g for y in g for z in g], np.float32)
+    (run / "walls.vtp").write_bytes(vtp_bytes(block, {"body": np.zeros(len(block), np.int32)}))
+    img = read_png(render_run(run, tmp_path / "walls", every=2, progress=False)[1])
+    drawn = foreground(img) & ~plain
+    grey = np.ptp(img, axis=-1) < 12  # r, g and b alike: not the water's blue
+    assert drawn.sum() > 500 and grey[drawn].mean() > 0.95, (drawn.sum(), grey[drawn].mean())
+    assert not np.any(foreground(img) & ~drawn & ~plain)
+    # where the block is: its centre projected by the render's camera
+    x, y = project(block.mean(axis=0), (0, 0, 0), (0.3, 0.3, 0.3))
+    ys, xs = np.nonzero(drawn)
+    assert abs(xs.mean() - x) < 10 and abs(ys.mean() - y) < 10
+
+
+def test_render_draws_the_pier_of_the_shipped_scene(tmp_path, capsys):
+    """dam_break_obstacle_3d run for 2 steps: the run writes its pier's wall particles, and the picture shows
+    them in grey around the pier's axis (below the water's top, the column is far from it)."""
+    run = tmp_path / "run"
+    run_cli(capsys, "run", "dam_break_obstacle_3d", "--steps", "2", "--out", run)
+    scene = Scene.load("dam_break_obstacle_3d")
+    assert len(read_positions(run / "walls.vtp")) == len(scene.wall_positions()[0])
+    run_cli(capsys, "render", run, "--out", tmp_path / "frames", "--every", "2")
+    img = read_png(tmp_path / "frames" / "dam_break_obstacle_3d_surface_0000000.png")
+    grey = foreground(img) & (np.ptp(img, axis=-1) < 12) & (img.mean(axis=-1) > 100)  # not the outline's dark grey
+    top, foot = (project((0.6, y, 0.15), scene["domain.box_min"], scene["domain.box_max"]) for y in (0.3, 0.0))
+    ys, xs = np.nonzero(grey)
+    assert len(xs) > 2000
+    assert abs(np.median(xs) - (top[0] + foot[0]) / 2) < 20 and top[1] - 20 < np.median(ys) < foot[1] + 20
+
+
+def project(point, box_min, box_max, size=(1024, 768)):
+    """Pixel (x, y) of `point` in render_run's pictures: the pinhole of box_camera's view, 30 degrees vertical."""
+    from sphcore.render import box_camera
+    position, focal, up = (np.array(v) for v in box_camera(box_min, box_max, aspect=size[0] / size[1]))
+    d = (position - focal) / np.linalg.norm(position - focal)
+    right = np.cross(-d, up) / np.linalg.norm(np.cross(-d, up))
+    v = np.asarray(point, float) - position
+    scale = size[1] / 2 / math.tan(math.radians(15)) / (v @ -d)
+    return (size[0] - 1) / 2 + scale * (v @ right), (size[1] - 1) / 2 - scale * (v @ up)
+
+
 def error_line(capsys, *argv):
     code = main([str(a) for a in argv])
     out, err = capsys.readouterr()

@@ -7,6 +7,8 @@
   origin, 48 sides: a container (fluid = "inside").
 - wedge.stl: a sloping beach, a right triangular prism 0.6 m long (x), 0.2 m high (y) and 0.4 m wide (z), its
   vertical face at x = 0.6 m and its toe at the origin: an obstacle (fluid = "outside"), slope 1 : 3.
+- cylinder_pier.stl: a vertical (y up) circular pier, radius 0.045 m, height 0.3 m, its base centred on the
+  origin, 32 sides: the obstacle of scenes/dam_break_obstacle_3d.toml (translated there).
 Every mesh is closed (watertight), wound outward; the files are binary STL of a few kB.
 """
 from pathlib import Path
@@ -39,8 +41,13 @@ def wedge(length=0.6, height=0.2, width=0.4):
     return trimesh.Trimesh(vertices, faces)
 
 
+def cylinder_pier(radius=0.045, height=0.3, sections=32):
+    return cylinder_tank(radius, height, sections)
+
+
 def main():
-    for name, mesh in (("spheric_box", spheric_box()), ("cylinder_tank", cylinder_tank()), ("wedge", wedge())):
+    for name, mesh in (("spheric_box", spheric_box()), ("cylinder_tank", cylinder_tank()), ("wedge", wedge()),
+                       ("cylinder_pier", cylinder_pier())):
         assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0, name
         mesh.export(HERE / f"{name}.stl")
         print(f"{name}.stl: {len(mesh.faces)} triangles, volume {mesh.volume:.6g} m^3, bounds {mesh.bounds.tolist()}")
