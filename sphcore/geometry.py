@@ -270,7 +270,8 @@ _RECENT = {}  # the entries _cached read or made last in this process, by path (
 def _remember(path, arrays, keep=32):
     """`arrays`, kept in _RECENT (the oldest of more than `keep` dropped); their copies' buffers are read-only."""
     for values in arrays.values():
-        values.flags.writeable = False
+        if isinstance(values, np.ndarray):
+            values.flags.writeable = False
     _RECENT[path] = arrays
     while len(_RECENT) > keep:
         _RECENT.pop(next(iter(_RECENT)))

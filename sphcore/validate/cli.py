@@ -66,7 +66,7 @@ def cmd_tank(args):
 def cmd_spheric(args):
     from sphcore.validate import spheric
 
-    settings = physics_settings(args, ("backend", "device", "spacing", "t_end", "dt_fraction"))
+    settings = physics_settings(args, ("backend", "device", "spacing", "t_end", "dt_fraction", "obstacle"))
     rows, summary = spheric.run_spheric(settings, args.out)
     png = plotted(spheric.plot, rows, summary, Path(args.out) / "spheric_test2.png")
     rms = ", ".join(f"{g} {summary[f'rms_{g}']:.3f}" for g in spheric.GAUGES)
@@ -217,6 +217,8 @@ def add_commands(sub):
     s.add_argument("--spacing", type=positive(float), help="particle spacing dx in m (default 0.02: 85,400 particles)")
     s.add_argument("--t-end", type=positive(float), help="simulated seconds (default 6)")
     s.add_argument("--dt-fraction", type=positive(float), help="fraction of the stability bound (default 0.5)")
+    s.add_argument("--obstacle", choices=["box", "mesh"], help="the box as domain.obstacles (mirror images; the "
+                   "default) or as a body from scenes/meshes/spheric_box.stl (wall particles; its force recorded)")
     add_physics_options(s)
     s.set_defaults(func=cmd_spheric)
 

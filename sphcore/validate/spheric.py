@@ -60,6 +60,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sphcore.errors import Interrupted, SimulationError
+from sphcore.paths import SCENE_DIR
 from sphcore.scene import Scene
 from sphcore.signals import Signals
 from sphcore.validate import DATA_DIR, configs, sensors
@@ -79,6 +80,7 @@ SENSORS = {  # (x, y, z) of each pressure sensor
 DATA_FILE = "spheric_test2_kleefsman2005_P1-P8_H1-H4.csv"
 # gauge -> the column of DATA_FILE (0 = t) that holds it: the file's height columns are H3, H2, H1, H4
 DATA_COLUMNS = {**{f"P{k}": k for k in range(1, 9)}, "H3": 9, "H2": 10, "H1": 11, "H4": 12}
+OBSTACLE_MESH = SCENE_DIR / "meshes" / "spheric_box.stl"  # the box as a closed surface (scenes/meshes/make_meshes.py)
 SAMPLE_DT = 0.01  # s between samples
 SMOOTH_S = 0.1  # s: the running mean of the pressures that the JSON and the plot give beside each sample
 RMS_UNTIL = 6.0  # s: the errors are taken over t <= this (or the run's end)
@@ -92,6 +94,7 @@ SETTINGS = {  # what `sphcore validate spheric` runs
     "alpha": 0.02,  # viscosity mu = alpha rho_0 c h / (2 dim + 4)
     "smoothing_ratio": 2.0,
     "dt_fraction": 0.5,  # of the stability bound (dt = "auto"): the whole bound blew up (module docstring)
+    "obstacle": "box",  # box: domain.obstacles (mirror images); mesh: the same box as a body from OBSTACLE_MESH
     "config": configs.DEFAULT_CONFIG,  # the model (sphcore.validate.configs); the switches below override it
     **{option: None for option in configs.OPTIONS},
 }
@@ -105,11 +108,13 @@ def spheric_scene(settings=None):
     n = [max(1, round(w / dx)) for w in WATER]
     h = s["smoothing_ratio"] * dx
     viscosity = s["alpha"] * 1000.0 * math.sqrt(s["stiffness"]) * h / 10.0
+    box = s["obstacle"] == "box"
     return Scene.from_dict(configs.apply({
         "name": "spheric_test2",
         "physics": {"model": "graphics", "dimension": 3, "equation_of_state": "tait", "precision": s["precision"]},
         "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": list(TANK),
-                   "obstacles": [{"min": list(BOX_MIN), "max": list(BOX_MAX)}]},
+                   "obstacles": [{"min": list(BOX_MIN), "max": list(BOX_MAX)}] if box else []},
+        "bodies": [] if box else [{"name": "box", "mesh": str(OBSTACLE_MESH)}],
         "fluid": {"blocks": [{"min": [TANK[0] - n[0] * dx, 0.0, 0.0], "max": [TANK[0], n[1] * dx, min(n[2] * dx, TANK[2])]}],
                   "spacing": dx, "smoothing_ratio": s["smoothing_ratio"], "stiffness": s["stiffness"],
                   "viscosity": viscosity},
@@ -136,6 +141,15 @@ def pressures(x, p, h):
         total = q.sum()
         out[name] = float((q * p).sum() / total) if total > 0 else 0.0
     return out
+
+
+def obstacle_force(sim):
+    """{Fx, Fy, Fz: the fluid's force on the box [N]} where it is a body (obstacle "mesh"): m sum a over its wall
+    particles, as a force gauge sums it (sphcore/gauges.py); {} for the box of mirror images, which has none."""
+    if sim.n == sim.fluid_count:
+        return {}
+    force = sim.scene.mass * sim.walls["particle_a"].astype(np.float64).sum(axis=0)
+    return dict(zip(("Fx", "Fy", "Fz"), map(float, force)))
 
 
 def read_experiment():
@@ -189,7 +203,7 @@ def run_spheric(settings=None, out_dir=None, progress=True):
             while True:
                 state = sim.read()
                 x, p = state["particle_x"].astype(np.float64), state["particle_p"].astype(np.float64)
-                rows.append({"t": sim.time, **water_heights(x, dx, h), **pressures(x, p, h)})
+                rows.append({"t": sim.time, **water_heights(x, dx, h), **pressures(x, p, h), **obstacle_force(sim)})
                 if sim.step_count >= steps if not adaptive else sim.time >= s["t_end"] * (1 - 1e-9):
                     break
                 k = min(every, steps - sim.step_count) if not adaptive else every
@@ -247,7 +261,8 @@ def plot(rows, summary, path):
 
     t_exp, exp = read_experiment()
     t = np.array([r["t"] for r in rows])
-    fig, axes = plt.subplots(3, 4, figsize=(15, 9), dpi=100)
+    force = "Fx" in rows[0]
+    fig, axes = plt.subplots(4 if force else 3, 4, figsize=(15, 12 if force else 9), dpi=100)
     for ax, name in zip(axes.flat, list(GAUGES) + list(SENSORS)):
         sim = np.array([r[name] for r in rows])
         if name in GAUGES:
@@ -266,6 +281,12 @@ def plot(rows, summary, path):
         ax.set_xlim(0, max(t[-1], 0.1))
         ax.tick_params(labelsize=7)
         ax.set_ylabel(f"{'height' if name in GAUGES else 'pressure'} [{unit}]", fontsize=7)
+    if force:  # the fluid's force on the box (a body), each component
+        for k, ax in zip("xyz", axes[3]):
+            ax.plot(t, [r[f"F{k}"] for r in rows], "k-", lw=0.8)
+            ax.set_title(f"F{k} on the box (its wall particles) [N]", fontsize=8)
+            ax.tick_params(labelsize=7)
+        axes[3, 3].axis("off")
     axes[0, 0].legend(fontsize=7)
     axes[1, 0].legend(fontsize=6)
     for ax in axes[-1]:
@@ -273,7 +294,8 @@ def plot(rows, summary, path):
     s = summary["settings"]
     model = (f"Tait, c = {math.sqrt(s['stiffness']):g} m/s" if summary.get("configuration", {}).get(
         "physics.pressure_solver") != "dfsph" else "DFSPH")
-    fig.suptitle(f"SPHERIC test 2: {summary['particles']} particles (dx = {s['spacing']:g} m), {model}, "
+    fig.suptitle(f"SPHERIC test 2, the box {'of mirror images' if s.get('obstacle', 'box') == 'box' else 'an STL body'}: "
+                 f"{summary['particles']} particles (dx = {s['spacing']:g} m), {model}, "
                  f"{s['precision']}, {s['backend']} on {summary['device']}, {summary['wall_s']:.0f} s", fontsize=9)
     fig.tight_layout()
     atomic_savefig(fig, path)
