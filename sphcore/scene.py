@@ -180,7 +180,8 @@ SCHEMA = {
                          f"across their faces, as at the walls): [{{min = [...], max = [...]}}], at most {MAX_OBSTACLES}",
                          "boxes"),
         "wall_model": Key("free_slip", "", 0, 0, "velocity of the walls' and obstacles' mirror images: free_slip "
-                          "reverses its normal component (no shear), no_slip all of it (the fluid is dragged)",
+                          "reverses its normal component (no shear), no_slip all of it (the fluid is dragged); "
+                          "the bodies' wall particles: no shear, or the fluid's velocity reversed (Adami et al. 2012)",
                           "free_slip|no_slip"),
     },
     "fluid": {
