@@ -93,27 +93,20 @@ void main() {
     rhoi = particle_rho[i];
     real pi = particle_p[i];
     pi_rho2 = pi / (rhoi * rhoi);
-    // [3] wall and obstacle images, as in compute_density; an image's normal velocity is reversed
-    //     (free slip); `inward` points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN):
-    //     the walls and cells of where i was at the list's build, as compute_density's
-    real3 x_built = LIST_SKIN > 0u ? scratch_x[i].xyz : xi;
-    real3 wall;
-    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
-    real3 inward;
-    mirrored = near_obstacles(xi, mirrored, wall, inward);
-    // [4] sums over every other particle and every image within h (walk.glsl: i's list, or the scan)
+    // [3] sums over every other particle and every wall or obstacle image within h (walk.glsl: i's list, or the
+    //     scan)
     f_pressure = real3(0.0);
     f_viscosity = real3(0.0);
     f_cohesion = real3(0.0);
     f_shift = real4(0.0);
-    walk_neighbours(i, xi, x_built, mirrored, wall, inward);
-    // [5] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
+    walk_neighbours(i, xi);
+    // [4] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
     //     laminar sum is divided by rho_i, viscosity.glsl); a wall particle: the fluid's terms only
     real3 a = f_pressure;
     if (VISCOSITY) a += viscous_acceleration(f_viscosity, rhoi);
     if (SURFACE_TENSION && !wall_i) a += P.cohesion_coef * f_cohesion;
     if (GRAVITY && !wall_i) a += P.gravity;
-    // [6] store, with shifting its sums (grad C_i, div r_i) for integrate; reused lists: the next build is
+    // [5] store, with shifting its sums (grad C_i, div r_i) for integrate; reused lists: the next build is
     //     integrate's to ask for (every dispatch that reads the request has run: backends.plan)
     particle_a[i] = real4(a, 0.0);
     if (SHIFTING > 0u) particle_shift[i] = f_shift;

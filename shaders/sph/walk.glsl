@@ -13,12 +13,21 @@
 // every particle without lists, is scanned: the images of `mirrored`'s bits (cells.glsl: near_walls; obstacles.glsl:
 // near_obstacles) and the 3^dim cells around each image of x_built (where i was at the list's build with reused
 // lists, else xi), or all pairs without the grid.
-// Needs particle_x, cell_pyramid, cell_start, obstacle_box and the lists' buffers declared by the shader, after
-// cells.glsl, kernels.glsl, pairs.glsl, obstacles.glsl and neighbour_list.glsl.
+// Needs particle_x, scratch_x, cell_pyramid, cell_start, obstacle_box and the lists' buffers declared by the shader,
+// after cells.glsl, kernels.glsl, pairs.glsl, obstacles.glsl and neighbour_list.glsl.
 // Mirror: sphcore/sph/walk.py (same names, same statements).
 
-// Hands every other particle and image within h of i to `pair`, in the list's or the scan's order.
-void walk_neighbours(uint i, real3 xi, real3 x_built, uint mirrored, real3 wall, real3 inward) {
+// Hands every other particle and image within h of i (at xi) to `pair`, in the list's or the scan's order.
+void walk_neighbours(uint i, real3 xi) {
+    // the wall and obstacle images, as in compute_density (cells.glsl: near_walls, obstacles.glsl: near_obstacles):
+    // bit a of `mirrored` says that the wall on axis a, or an obstacle's face where nearer, is within h; `inward`
+    // points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN): the walls and cells of where i
+    // was at the list's build (scratch_x)
+    real3 x_built = LIST_SKIN > 0u ? scratch_x[i].xyz : xi;
+    real3 wall;
+    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
+    real3 inward;
+    mirrored = near_obstacles(xi, mirrored, wall, inward);
     // i's list where it fits its slots, else the scan (below: the list's loop after the scan's, an order in
     // which the GPU's compiler keeps the two loops apart: with reused lists, where both end alike, the other
     // order cost compute_forces 8 % on an H200, issue 31)

@@ -77,20 +77,14 @@ void main() {
     // [1] one invocation per wall particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n || particle_id[i] < P.fluid_count) return;
-    // [2] wall and obstacle images, as in compute_forces (reused lists: where i was at the build)
+    // [2] the sums over the fluid and its images within h (walk.glsl)
     real3 xi = particle_x[i].xyz;
-    real3 x_built = LIST_SKIN > 0u ? scratch_x[i].xyz : xi;
-    real3 wall;
-    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
-    real3 inward;
-    mirrored = near_obstacles(xi, mirrored, wall, inward);
-    // [3] the sums over the fluid within h (walk.glsl)
     sum_w = real(0.0);
     sum_p = real(0.0);
     sum_rho_r = real3(0.0);
     sum_v = real3(0.0);
-    walk_neighbours(i, xi, x_built, mirrored, wall, inward);
-    // [4] Adami's pressure (gravity with GRAVITY; a fixed wall has no acceleration) and velocity
+    walk_neighbours(i, xi);
+    // [3] Adami's pressure (gravity with GRAVITY; a fixed wall has no acceleration) and velocity
     real p = real(0.0);
     real3 v = real3(0.0);
     if (sum_w > real(0.0)) {
@@ -99,7 +93,7 @@ void main() {
         if (NO_SLIP) v = -sum_v / sum_w;
     }
     if (!CONTINUITY) p = max(p, real(0.0));
-    // [5] store
+    // [4] store
     particle_p[i] = p;
     particle_rho[i] = wall_density(p);
     particle_v[i] = real4(v, 0.0);

@@ -15,11 +15,9 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.cells import cells, skin
 from sphcore.sph.cohesion import cohesion
 from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.kernels import kernels
-from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
 from sphcore.sph.pressure import pressure
 from sphcore.sph.shifting import shifting
@@ -32,12 +30,7 @@ from sphcore.workgroups import launcher
 @lru_cache(maxsize=None)
 def compute_forces(spec, real=np.float32):
     VISCOSITY, SURFACE_TENSION, GRAVITY = spec.VISCOSITY, spec.SURFACE_TENSION, spec.GRAVITY
-    DFSPH, SHIFTING, BODIES, NO_SLIP = spec.DFSPH, spec.SHIFTING, spec.BODIES, spec.NO_SLIP
-    near_walls = cells(spec, real).near_walls
-    near_walls_within = skin(spec, real).near_walls_within
-    list_reach = skin(spec, real).list_reach
-    LIST_SKIN = spec.LIST_SKIN
-    near_obstacles = obstacles(spec, real).near_obstacles
+    DFSPH, SHIFTING, BODIES, NO_SLIP, LIST_SKIN = spec.DFSPH, spec.SHIFTING, spec.BODIES, spec.NO_SLIP, spec.LIST_SKIN
     image_velocity = walls(spec, real).image_velocity
     viscous_term = viscosity(spec, real).viscous_term
     viscous_acceleration = viscosity(spec, real).viscous_acceleration
@@ -116,27 +109,15 @@ def compute_forces(spec, real=np.float32):
         rhoi = particle_rho[i]
         pi = particle_p[i]
         pi_rho2 = pi / (rhoi * rhoi)
-        # [3] wall and obstacle images, as in compute_density; an image's normal velocity is reversed
-        #     (free slip); `inward` points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN):
-        #     the walls and cells of where i was at the list's build, as compute_density's
-        x_built_x = scratch_x[i, 0] if LIST_SKIN > 0 else xi_x
-        x_built_y = scratch_x[i, 1] if LIST_SKIN > 0 else xi_y
-        x_built_z = scratch_x[i, 2] if LIST_SKIN > 0 else xi_z
-        if LIST_SKIN > 0:
-            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
-        else:
-            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
-        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
-            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
-        # [4] sums over every other particle and every image within h (walk.glsl: i's list, or the scan)
+        # [3] sums over every other particle and every wall or obstacle image within h (walk.glsl: i's list, or the
+        #     scan)
         zero = real(0.0)
         (f_pressure_x, f_pressure_y, f_pressure_z, f_viscosity_x, f_viscosity_y, f_viscosity_z,
          f_cohesion_x, f_cohesion_y, f_cohesion_z, f_shift_x, f_shift_y, f_shift_z, f_shift_w) = walk_neighbours(
-            P, particle_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i, xi_x, xi_y, xi_z,
-            x_built_x, x_built_y, x_built_z, mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z,
-            (P, particle_v, particle_rho, particle_p, particle_id, wall_i, vi_x, vi_y, vi_z, rhoi, pi_rho2),
+            P, particle_x, scratch_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i, xi_x, xi_y,
+            xi_z, (P, particle_v, particle_rho, particle_p, particle_id, wall_i, vi_x, vi_y, vi_z, rhoi, pi_rho2),
             (zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero))
-        # [5] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
+        # [4] a_i = f_pressure + viscous acceleration + cohesion + g (f_pressure is per unit mass; the
         #     laminar sum is divided by rho_i, viscosity.glsl); a wall particle: the fluid's terms only
         a_x = f_pressure_x
         a_y = f_pressure_y
@@ -154,7 +135,7 @@ def compute_forces(spec, real=np.float32):
             a_x += P.gravity[0]
             a_y += P.gravity[1]
             a_z += P.gravity[2]
-        # [6] store, with shifting its sums (grad C_i, div r_i) for integrate; reused lists: the next build is
+        # [5] store, with shifting its sums (grad C_i, div r_i) for integrate; reused lists: the next build is
         #     integrate's to ask for (every dispatch that reads the request has run: backends.plan)
         particle_a[i, 0] = a_x
         particle_a[i, 1] = a_y

@@ -9,9 +9,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.cells import cells, skin
 from sphcore.sph.kernels import kernels
-from sphcore.sph.obstacles import obstacles
 from sphcore.sph.walk import walk
 from sphcore.sph.walls import walls
 from sphcore.workgroups import launcher
@@ -19,11 +17,7 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def wall_pressure(spec, real=np.float32):
-    NO_SLIP, TAIT, GRAVITY, CONTINUITY, LIST_SKIN = spec.NO_SLIP, spec.TAIT, spec.GRAVITY, spec.CONTINUITY, spec.LIST_SKIN
-    near_walls = cells(spec, real).near_walls
-    near_walls_within = skin(spec, real).near_walls_within
-    list_reach = skin(spec, real).list_reach
-    near_obstacles = obstacles(spec, real).near_obstacles
+    NO_SLIP, TAIT, GRAVITY, CONTINUITY = spec.NO_SLIP, spec.TAIT, spec.GRAVITY, spec.CONTINUITY
     image_velocity = walls(spec, real).image_velocity
     kernel_w = kernels(spec, real).kernel_w
 
@@ -71,26 +65,16 @@ def wall_pressure(spec, real=np.float32):
         # [1] one invocation per wall particle; the grid is rounded up to whole work groups
         if i >= P.n or particle_id[i] < P.fluid_count:
             return
-        # [2] wall and obstacle images, as in compute_forces (reused lists: where i was at the build)
+        # [2] the sums over the fluid and its images within h (walk.glsl)
         xi_x = particle_x[i, 0]
         xi_y = particle_x[i, 1]
         xi_z = particle_x[i, 2]
-        x_built_x = scratch_x[i, 0] if LIST_SKIN > 0 else xi_x
-        x_built_y = scratch_x[i, 1] if LIST_SKIN > 0 else xi_y
-        x_built_z = scratch_x[i, 2] if LIST_SKIN > 0 else xi_z
-        if LIST_SKIN > 0:
-            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
-        else:
-            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
-        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
-            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
-        # [3] the sums over the fluid within h (walk.glsl)
         zero = real(0.0)
         sum_w, sum_p, sum_rho_r_x, sum_rho_r_y, sum_rho_r_z, sum_v_x, sum_v_y, sum_v_z = walk_neighbours(
-            P, particle_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i, xi_x, xi_y, xi_z,
-            x_built_x, x_built_y, x_built_z, mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z,
-            (P, particle_v, particle_rho, particle_p, particle_id), (zero, zero, zero, zero, zero, zero, zero, zero))
-        # [4] Adami's pressure (gravity with GRAVITY; a fixed wall has no acceleration) and velocity
+            P, particle_x, scratch_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i, xi_x,
+            xi_y, xi_z, (P, particle_v, particle_rho, particle_p, particle_id), (zero, zero, zero, zero, zero, zero,
+                                                                                zero, zero))
+        # [3] Adami's pressure (gravity with GRAVITY; a fixed wall has no acceleration) and velocity
         p = real(0.0)
         v_x = v_y = v_z = real(0.0)
         if sum_w > real(0.0):
@@ -104,7 +88,7 @@ def wall_pressure(spec, real=np.float32):
                 v_z = -sum_v_z / sum_w
         if not CONTINUITY:
             p = max(p, real(0.0))
-        # [5] store
+        # [4] store
         particle_p[i] = p
         particle_rho[i] = wall_density(P, p)
         particle_v[i, 0] = v_x
