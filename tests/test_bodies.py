@@ -6,6 +6,8 @@ import json
 import numpy as np
 import pytest
 
+from conftest import vulkan_or_skip
+
 from sphcore import geometry
 from sphcore.runner import run
 from sphcore.scene import Scene
@@ -119,3 +121,24 @@ def test_a_run_writes_the_walls_once_and_the_fluid_alone(tmp_path):
     text = (tmp_path / "walls.vtp").read_bytes()
     assert f'NumberOfPoints="{len(walls)}"'.encode() in text and b'Name="body"' in text
     assert f'NumberOfPoints="{fluid}"'.encode() in (tmp_path / "scene_0000010.vtp").read_bytes()
+
+
+@pytest.mark.vulkan
+def test_gauges_on_a_body_write_the_same_bytes_on_both_backends(tmp_path):
+    """A tank at rest with a force, a pressure and a height gauge: numba and lavapipe write the same CSV bytes, and
+    the force on the tank is the water's weight: each sample within 5 % (the column rings, as a weakly compressible
+    one does), their mean within 1 %."""
+    vulkan_or_skip()
+    gauges = [{"name": "force", "quantity": "force", "body": "tank", "interval": 0.005},
+              {"name": "p", "quantity": "pressure", "at": [0.5, 0.23], "interval": 0.005},
+              {"name": "h", "quantity": "height", "at": [0.5, 0.21], "interval": 0.005}]
+    scene = scene_of(TANK, fluid={"blocks": [{"min": [0.2, 0.2], "max": [0.8, 0.5]}]}, gauges=gauges)
+    for backend in ("numba", "vulkan"):
+        run(scene, backend=backend, steps=60, out_dir=tmp_path / backend, progress=False)
+    for gauge in gauges:
+        name = f"gauges/{gauge['name']}.csv"
+        assert (tmp_path / "numba" / name).read_bytes() == (tmp_path / "vulkan" / name).read_bytes(), name
+    rows = np.loadtxt(tmp_path / "numba" / "gauges/force.csv", delimiter=",", skiprows=1, ndmin=2)
+    weight = scene.mass * scene.fluid_count() * 9.81
+    assert len(rows) >= 10 and np.all(np.abs(rows[:, 2] + weight) < 0.05 * weight)
+    assert abs(rows[:, 2].mean() + weight) < 0.01 * weight

@@ -6,7 +6,7 @@
 // as the snapshots), and nothing else: a step with no sample due costs one comparison a gauge.
 //   pressure, velocity, density at a point x: the Shepard-normalised SPH interpolation over the fluid within h,
 //     q(x) = sum_j q_j V_j W(x - x_j) / sum_j V_j W(x - x_j), V_j = m / rho_j (DualSPHysics' MeasureTool and
-//     GaugeVel; Shepard 1968); mirror images across the walls are left out (the normalisation makes up for the
+//     GaugeVel; Shepard 1968); mirror images across the walls and the bodies' wall particles are left out (the normalisation makes up for the
 //     missing half of the support at a wall). No fluid within h: 0.
 //   height: the free-surface elevation above the foot x on the vertical line (DualSPHysics' GaugeSwl; the axis
 //     gravity points along, gauge_state's second word, upward toward the box's top): the kernel-weighted mass sum m sum_j W is evaluated every `step` (gauge_table's second row, dx / 2)
@@ -55,7 +55,7 @@ bool reached(float t, float target) {
 }
 
 // Sums over the fluid within h of point x: (sum V W, sum V W p, sum V W rho, sum W) and sum V W v, V W in units of
-// m times W's coefficient (which the normalisation cancels).
+// m times W's coefficient (which the normalisation cancels); the bodies' wall particles left out.
 real4 point_sums(real3 x, out real3 sum_v) {
     real4 sums = real4(0.0);
     sum_v = real3(0.0);
@@ -73,7 +73,7 @@ real4 point_sums(real3 x, out real3 sum_v) {
         for (uint j = start; j < end; ++j) {
             real3 r = x - particle_x[j].xyz;
             real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-            if (r2 >= P.h2) continue;
+            if (r2 >= P.h2 || (BODIES && particle_id[j] >= P.fluid_count)) continue;
             real w = kernel_w(r2);
             real vw = w / particle_rho[j];
             sums += real4(vw, vw * particle_p[j], vw * particle_rho[j], w);

@@ -23,7 +23,7 @@ PRESSURE, VELOCITY, DENSITY, HEIGHT, FORCE, MOMENT = range(6)  # sphcore.gauges.
 
 @lru_cache(maxsize=None)
 def sample_gauges(spec, real=np.float32):
-    GRID = spec.GRID
+    GRID, BODIES = spec.GRID, spec.BODIES
     cell_of = cells(spec, real).cell_of
     range_count = cells(spec, real).range_count
     range_cells = cells(spec, real).range_cells
@@ -36,8 +36,10 @@ def sample_gauges(spec, real=np.float32):
         return t >= least
 
     @njit
-    def point_sums(P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start):
-        """Sums over the fluid within h of point x: (sum V W, sum V W p, sum V W rho, sum W) and sum V W v."""
+    def point_sums(P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, particle_id, cell_pyramid,
+                   cell_start):
+        """Sums over the fluid within h of point x: (sum V W, sum V W p, sum V W rho, sum W) and sum V W v; the
+        bodies' wall particles left out."""
         sums_x = sums_y = sums_z = sums_w = real(0.0)
         sum_v_x = sum_v_y = sum_v_z = real(0.0)
         base_x, base_y, base_z = cell_of(P, x_x, x_y, x_z)
@@ -55,7 +57,7 @@ def sample_gauges(spec, real=np.float32):
                 r_y = x_y - particle_x[j, 1]
                 r_z = x_z - particle_x[j, 2]
                 r2 = r_x * r_x + r_y * r_y + r_z * r_z
-                if r2 >= P.h2:
+                if r2 >= P.h2 or (BODIES and particle_id[j] >= P.fluid_count):
                     continue
                 w = kernel_w(P, r2)
                 vw = w / particle_rho[j]
@@ -69,8 +71,8 @@ def sample_gauges(spec, real=np.float32):
         return sums_x, sums_y, sums_z, sums_w, sum_v_x, sum_v_y, sum_v_z
 
     @njit
-    def surface_height(P, x_x, x_y, x_z, step, up, particle_x, particle_v, particle_rho, particle_p, cell_pyramid,
-                       cell_start):
+    def surface_height(P, x_x, x_y, x_z, step, up, particle_x, particle_v, particle_rho, particle_p, particle_id,
+                       cell_pyramid, cell_start):
         """The free surface's elevation above foot x on the vertical line, along axis `up` (0 where the mass sum
         never reaches rho_0 / 2)."""
         x_up = x_x if up == 0 else x_y if up == 1 else x_z
@@ -84,7 +86,7 @@ def sample_gauges(spec, real=np.float32):
             at_x, at_y, at_z = x_x, x_y, x_z
             at_x, at_y, at_z = (level if up == 0 else at_x), (level if up == 1 else at_y), (level if up == 2 else at_z)
             mass = real(P.density_coef) * point_sums(P, at_x, at_y, at_z, particle_x, particle_v, particle_rho,
-                                                     particle_p, cell_pyramid, cell_start)[3]
+                                                     particle_p, particle_id, cell_pyramid, cell_start)[3]
             # a fall below half the rest density between the last point and this one: the surface (the highest one)
             if k > 0 and before >= half_rest and mass < half_rest:
                 height = level - step + step * (before - half_rest) / (before - mass) - x_up
@@ -118,7 +120,7 @@ def sample_gauges(spec, real=np.float32):
         value_x = value_y = value_z = real(0.0)
         if quantity <= DENSITY:
             sums_x, sums_y, sums_z, sums_w, sum_v_x, sum_v_y, sum_v_z = point_sums(
-                P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start)
+                P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, particle_id, cell_pyramid, cell_start)
             if sums_x > real(0.0):
                 if quantity == PRESSURE:
                     value_x = sums_y / sums_x
@@ -128,7 +130,7 @@ def sample_gauges(spec, real=np.float32):
                     value_x = sums_z / sums_x
         if quantity == HEIGHT:
             value_x = surface_height(P, x_x, x_y, x_z, aux_x, body_first, particle_x, particle_v, particle_rho, particle_p,
-                                     cell_pyramid, cell_start)
+                                     particle_id, cell_pyramid, cell_start)
         if quantity >= FORCE:
             force_x = force_y = force_z = real(0.0)
             moment_x = moment_y = moment_z = real(0.0)
