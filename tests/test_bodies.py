@@ -10,7 +10,8 @@ from conftest import vulkan_or_skip
 
 from sphcore import geometry
 from sphcore.runner import run
-from sphcore.scene import Scene
+from sphcore.paths import SCENE_DIR
+from sphcore.scene import Scene, SceneError
 from sphcore.simulation import Simulation
 
 # a square tank from a polygon (fluid inside), inside the box and more than h from its walls (no mirror images)
@@ -142,3 +143,9 @@ def test_gauges_on_a_body_write_the_same_bytes_on_both_backends(tmp_path):
     weight = scene.mass * scene.fluid_count() * 9.81
     assert len(rows) >= 10 and np.all(np.abs(rows[:, 2] + weight) < 0.05 * weight)
     assert abs(rows[:, 2].mean() + weight) < 0.01 * weight
+
+
+def test_a_mesh_given_as_a_scene_is_named_so():
+    """`sphcore run wedge.stl` says the file is a mesh for a scene's [[bodies]], not "malformed TOML"."""
+    with pytest.raises(SceneError, match=r"wedge\.stl: a mesh, not a scene: name it in a scene's \[\[bodies\]\]"):
+        Scene.load(SCENE_DIR / "meshes" / "wedge.stl")
