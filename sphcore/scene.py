@@ -43,7 +43,6 @@ def scene_path(name):
     return shipped if shipped.exists() else path
 
 
-MESH_SUFFIXES = (".stl", ".obj", ".ply")  # files a body's mesh may be (sphcore.geometry), which are no scene
 MAX_SCENE_BYTES = 2**20  # a scene file (or a run's scene.json) larger than this is not one
 
 
@@ -478,7 +477,7 @@ class Scene:
     def load(cls, path):
         """The scene in TOML file `path`, or the shipped scene of that name (`Scene.load("dam_break_2d")`)."""
         given, path = path, scene_path(path)
-        if Path(path).suffix.lower() in MESH_SUFFIXES:
+        if Path(path).suffix.lower() in geometry.MESH_SUFFIXES:
             raise SceneError(f"{path}: a mesh, not a scene: name it in a scene's [[bodies]] (mesh = \"{Path(path).name}\"; "
                              "docs/scenes.md, Bodies)")
         try:
