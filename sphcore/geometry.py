@@ -264,15 +264,16 @@ def _region(body, origin, dx, counts, margin):
     return lo, np.maximum(hi, lo)
 
 
-_RECENT = {}  # the entries _cached read or made last in this process, by path (a sweep makes the same body often)
+_RECENT = {}  # path -> (the file's (mtime, size), its arrays): the entries _cached read last in this process (a
+#              sweep validates the same body thousands of times); a file changed since is read again
 
 
-def _remember(path, arrays, keep=32):
-    """`arrays`, kept in _RECENT (the oldest of more than `keep` dropped); their copies' buffers are read-only."""
+def _remember(path, arrays, stamp, keep=32):
+    """`arrays`, kept in _RECENT as the file at `path` with `stamp` (the oldest of more than `keep` dropped), read-only."""
     for values in arrays.values():
         if isinstance(values, np.ndarray):
             values.flags.writeable = False
-    _RECENT[path] = arrays
+    _RECENT[path] = stamp, arrays
     while len(_RECENT) > keep:
         _RECENT.pop(next(iter(_RECENT)))
     return arrays
@@ -283,16 +284,17 @@ def _cached(kind, body, lattice, compute):
     body's digest and `lattice` (json-able); read back with np.load(allow_pickle=False)."""
     key = hashlib.sha256(json.dumps([CACHE_VERSION, kind, body.digest, lattice]).encode()).hexdigest()
     path = cache_dir("geometry") / f"{kind}-{key[:40]}.npz"
-    if path in _RECENT:
-        return _RECENT[path]
     try:
+        stamp = os.stat(path)
+        if _RECENT.get(path, (None,))[0] == (stamp.st_mtime_ns, stamp.st_size):
+            return _RECENT[path][1]
         with np.load(path, allow_pickle=False) as f:
-            return _remember(path, {name: f[name] for name in f.files})
+            return _remember(path, {name: f[name] for name in f.files}, (stamp.st_mtime_ns, stamp.st_size))
     except FileNotFoundError:
         pass
     except Exception as e:  # damaged: compute it again and replace it
         warnings.warn(f"geometry cache entry {path} unreadable ({type(e).__name__}); computed again", CacheWarning)
-    arrays = _remember(path, compute())
+    arrays = compute()
     try:
         os.makedirs(path.parent, exist_ok=True)
         atomic_savez(path, **arrays)
