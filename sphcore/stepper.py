@@ -64,7 +64,9 @@ class Simulation:
     local_size, and for Vulkan device and validation).
 
     `step(k)` runs k steps; `read()` checks the state and returns it in particle order as numpy
-    arrays: particle_x, particle_v, particle_a (N, dim), particle_rho, particle_p (N,) and more;
+    arrays: particle_x, particle_v, particle_a (N, dim), particle_rho, particle_p (N,) and more, of the
+    fluid; the bodies' wall particles' are then in `walls` (their particle_a: the fluid's force on them per
+    unit mass; `body`: each one's body index), and `take_gauge_rows()` gives the gauges' samples;
     `time` and `step_count` say where the run is. `write_snapshot(dir)` writes a VTK snapshot,
     `surface()` extracts the fluid's surface (3D). `checkpoint()` and `restore(arrays)` save and
     put back everything a later step depends on. Use it in a `with` block, or call close().
@@ -80,6 +82,7 @@ class Simulation:
 
     solver_log = property(lambda self: self.solver.log, doc="DFSPH's SolverLog (sphcore.solvers.dfsph)")
     _carried = None  # the CARRIED buffers as the last read() saw them
+    walls = {}  # the bodies' wall particles' state as the last read() saw them
     energy_start = None  # the energy at the first read, the bound for every later one
     _closed = False
     _user = None  # (thread name, method) of the call inside the simulation now (_exclusive)
