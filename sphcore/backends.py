@@ -32,6 +32,7 @@ from sphcore.workgroups import group_count
 
 NAMES = list(BUFFERS)  # binding number = index
 
+
 def profile_name(stage):
     """A stage's row in a profile: its name, "compute_density (walk)" for the walk of reused lists."""
     return stage.name + (" (walk)" if stage.when == REUSE else "")
