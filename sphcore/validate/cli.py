@@ -63,6 +63,23 @@ def cmd_tank(args):
           f"{100 * summary['sensor_error_max']:.2f} %; targets: {met} -> {png}")
 
 
+def cmd_bodies(args):
+    from sphcore.validate import bodies
+
+    out = Path(args.out)
+    unknown = sorted(set(args.case or ()) - set(bodies.CASES))
+    if unknown:
+        raise SceneError(f"--case {unknown[0]}: no such case (known: {', '.join(bodies.CASES)})")
+    common = {k: v for k, v in (("backend", args.backend), ("device", args.device)) if v is not None}
+    for case in args.case or bodies.CASES:
+        settings = {**common, **({"spacing": args.spacing} if args.spacing and "spacing" in bodies.SETTINGS[case]
+                                 else {}), **({"t_end": args.t_end} if args.t_end else {}),
+                    **({"resolution": args.resolution} if args.resolution and case == "inclined_dam_break" else {})}
+        rows, summary = bodies.CASES[case](settings, out)
+        png = plotted(bodies.plot, rows, summary, out / f"{case}.png")
+        print(f"{case}: {bodies.describe(summary)} -> {png}")
+
+
 def cmd_spheric(args):
     from sphcore.validate import spheric
 
@@ -202,6 +219,18 @@ def add_commands(sub):
     d.add_argument("--t-end", type=positive(float), help="simulated seconds of settling (default 2)")
     add_model_options(d)
     d.set_defaults(func=cmd_tank)
+    d = cases.add_parser("bodies", help="bodies, wall particles and gauges: water at rest in a rotated and a "
+                         "cylindrical tank, the forces on a tank's walls, Martin & Moyce in an inclined tank")
+    d.add_argument("--out", required=True, help="output folder (CASE.csv, .json, .png for each case)")
+    d.add_argument("--case", action="append", help="run only this case (repeatable): rotated_tank, cylindrical_tank, "
+                   "forces_at_rest, inclined_dam_break (default: all)")
+    d.add_argument("--backend", choices=["numba", "vulkan"], help="(default numba)")
+    d.add_argument("--device", help="Vulkan device: index or part of its name")
+    d.add_argument("--spacing", type=positive(float), help="dx in m of the tanks at rest (defaults: 0.01 in 2D, "
+                   "0.035 in 3D)")
+    d.add_argument("--resolution", type=positive(int), help="inclined dam break: particles across a (default 40)")
+    d.add_argument("--t-end", type=positive(float), help="simulated seconds (defaults: 1 at rest, 0.5 dam break)")
+    d.set_defaults(func=cmd_bodies)
     d = cases.add_parser("stability", help="the stability matrix: every parameter at its extremes")
     d.add_argument("--out", required=True, help="output folder (a folder of snapshots per case, stability.json/.csv)")
     d.add_argument("--backend", choices=["numba", "vulkan"], default="numba")
