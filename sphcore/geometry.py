@@ -376,3 +376,33 @@ def fluid_mask(bodies, block_min, counts, dx):
         else:
             keep[region] &= inside.reshape(hi - lo)
     return keep.reshape(-1)
+
+
+def buried_keys(walls, box_min, box_max, dx):
+    """The wall lattice's points (as sorted flat indices) that wall particles surround: wall points whose 2 dim
+    lattice neighbours are wall points too. A fluid particle nearest one of them may have got into a body (buried:
+    the health check then measures how deep)."""
+    origin, counts = box_lattice(box_min, box_max, dx)
+    index = np.rint((np.asarray(walls, np.float64) - origin) / dx).astype(np.int64)
+    keys = np.sort(np.ravel_multi_index(index.T, counts, mode="clip"))
+    surrounded = np.ones(len(index), bool)
+    for axis in range(len(counts)):
+        for step in (-1, 1):
+            near = index.copy()
+            near[:, axis] += step
+            inside = (near[:, axis] >= 0) & (near[:, axis] < counts[axis])
+            found = np.zeros(len(index), bool)
+            at = np.ravel_multi_index(near[inside].T, counts)
+            found[inside] = keys[np.minimum(np.searchsorted(keys, at), len(keys) - 1)] == at
+            surrounded &= found | ~inside  # (beyond the box: the box's mirror wall)
+    return np.sort(np.ravel_multi_index(index[surrounded].T, counts))
+
+
+def buried(keys, x, box_min, box_max, dx):
+    """Which of the particles at x (n, dim) lie nearest a wall lattice point of `keys` (buried_keys): bool (n,)."""
+    if len(keys) == 0:
+        return np.zeros(len(x), bool)
+    origin, counts = box_lattice(box_min, box_max, dx)
+    index = np.clip(np.rint((np.asarray(x, np.float64) - origin) / dx), 0, counts - 1).astype(np.int64)
+    at = np.ravel_multi_index(index.T, counts)
+    return keys[np.minimum(np.searchsorted(keys, at), len(keys) - 1)] == at

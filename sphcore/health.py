@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from sphcore import geometry
 from sphcore.errors import SimulationError
 from sphcore.scene import stable_dt
 
@@ -62,6 +63,7 @@ def check_state(sim, state):
     check_energy(sim, state)
     if sim.scene["domain.boundary"] == "open":
         return
+    check_bodies(sim, state)
     x = state["particle_x"]
     # the walls as the shaders see them (float32): a particle clamped onto a wall sits exactly there
     lo = np.asarray(sim.scene["domain.box_min"], np.float32)
@@ -70,6 +72,28 @@ def check_state(sim, state):
     if outside.any():
         i = int(np.argmax(outside))
         raise SimulationError(f"step {sim.step_count}: particle {i} at {x[i]} left the box {lo} .. {hi}")
+
+
+def check_bodies(sim, state):
+    """Raise SimulationError at the first fluid particle more than a spacing inside a body (the wall leaked): of
+    those nearest a wall lattice point that wall particles surround (sphcore.geometry.buried), the signed distance
+    to the body of the wall particle nearest each. (A particle a fraction of a spacing in, at an impact, is pushed
+    back out by the wall's pressure.)"""
+    scene, dx = sim.scene, sim.scene["fluid.spacing"]
+    x = state["particle_x"]
+    suspects = np.flatnonzero(geometry.buried(sim.buried, x, scene["domain.box_min"], scene["domain.box_max"], dx))
+    if len(suspects) == 0:
+        return
+    walls = sim.walls["particle_x"]
+    body = np.array([sim.walls["body"][np.argmin(((walls - x[i]) ** 2).sum(axis=1))] for i in suspects])
+    for k in np.unique(body):
+        depth = -geometry.signed_distance(scene.bodies[k], x[suspects[body == k]])
+        if depth.max() > dx:
+            i = int(suspects[body == k][np.argmax(depth)])
+            raise SimulationError(f"step {sim.step_count} (t = {sim.time:.6g} s): fluid particle {i} at {x[i]} is "
+                                  f"{depth.max() / dx:.1f} spacings inside {geometry.where(k, scene['bodies'][k])}: "
+                                  "the wall leaked, as at a concave edge of a 3D body at coarse resolution "
+                                  "(docs/models/walls.md); refine fluid.spacing")
 
 
 def check_energy(sim, state):

@@ -9,7 +9,7 @@ import threading
 
 import numpy as np
 
-from sphcore import folder, gauges, health, memory
+from sphcore import folder, gauges, geometry, health, memory
 from sphcore.backends import check_options, make_backend
 from sphcore.checkpoint import CARRIED
 from sphcore.errors import CheckpointError, SimulationError
@@ -108,6 +108,8 @@ class Simulation:
         order = np.argsort(self.wall_body, kind="stable")
         walls, self.wall_body = walls[order], self.wall_body[order]
         self.fluid_count = len(x0)
+        self.buried = geometry.buried_keys(walls, scene["domain.box_min"], scene["domain.box_max"],
+                                           scene["fluid.spacing"])  # (health.check_bodies)
         x0 = np.concatenate([x0, walls]).astype(x0.dtype)
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n, self.fluid_count)

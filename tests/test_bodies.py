@@ -149,3 +149,14 @@ def test_a_mesh_given_as_a_scene_is_named_so():
     """`sphcore run wedge.stl` says the file is a mesh for a scene's [[bodies]], not "malformed TOML"."""
     with pytest.raises(SceneError, match=r"wedge\.stl: a mesh, not a scene: name it in a scene's \[\[bodies\]\]"):
         Scene.load(SCENE_DIR / "meshes" / "wedge.stl")
+
+
+def test_a_particle_through_the_first_wall_layer_is_found():
+    """geometry.buried (the health check's test for a leaked wall): none of the fluid at the start, not a point on the
+    tank's first layer of wall particles, yes a point a spacing deeper, inside the floor."""
+    scene = scene_of(TANK)
+    dx, lo, hi = scene["fluid.spacing"], scene["domain.box_min"], scene["domain.box_max"]
+    keys = geometry.buried_keys(scene.wall_positions()[0], lo, hi, dx)
+    assert not geometry.buried(keys, scene.initial_positions(), lo, hi, dx).any()
+    first, deeper = [0.5, 0.2 - dx / 2], [0.5, 0.2 - 1.6 * dx]
+    assert geometry.buried(keys, np.array([first, deeper]), lo, hi, dx).tolist() == [False, True]
