@@ -201,8 +201,8 @@ def wendland(q):
 def fluid_surface(scene, x, foot):
     """The free surface above `foot` as the height gauge defines it (sample_gauges.comp: the highest point of the
     vertical line where the mass sum falls below rho_0 / 2, every dx / 2, linear between), over the fluid
-    particles x only. The height gauge's own sum takes in the wall particles too (sample_gauges.comp's point_sums
-    loops over every particle of the cells): its line through a closed tank reads the lid. The mass sum is
+    particles x only (the gauge itself, since its sums leave the wall particles out, reads the same surface within
+    a few mm: the JSON gives both). The mass sum is
     m sum W, m the lattice mass (a full lattice sums to rho_0): here sum W over that of a full lattice."""
     dx, h, dim = scene["fluid.spacing"], scene.h, scene.dim
     k = np.arange(-math.ceil(h / dx), math.ceil(h / dx) + 1) * dx
