@@ -5,8 +5,8 @@
 // sums integrate shifts the particle by. The bodies' wall particles (BODIES, wall_pressure.comp: Adami et al. 2012)
 // act on the fluid through the pressure term (and with NO_SLIP the viscous one), not on each other; for each of
 // them this stage computes the fluid's force on it instead (per unit mass, without gravity: the gauges' force on
-// a body). Each pair's terms are `pair`'s, called by the one neighbour walk (walk.glsl: the list or the scan; wall and obstacle images as in compute_density). Each
-// optional term is compiled out by its specialization constant.
+// a body). Each pair's terms are `pair`'s, called by the one neighbour walk (walk.glsl: the list or the scan; wall
+// and obstacle images as in compute_density). Each optional term is compiled out by its specialization constant.
 // Mirror: sphcore/sph/compute_forces.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
