@@ -92,8 +92,7 @@ def check_bodies(sim, state):
             i = int(suspects[body == k][np.argmax(depth)])
             raise SimulationError(f"step {sim.step_count} (t = {sim.time:.6g} s): fluid particle {i} at {x[i]} is "
                                   f"{depth.max() / dx:.1f} spacings inside {geometry.where(k, scene['bodies'][k])}: "
-                                  "the wall leaked, as at a concave edge of a 3D body at coarse resolution "
-                                  "(docs/models/walls.md); refine fluid.spacing")
+                                  "the wall leaked (docs/models/walls.md: Limits)")
 
 
 def check_energy(sim, state):

@@ -82,7 +82,9 @@ uint listed_sum(uint i, real3 xi, real3 wall, uint count, inout real sum_w) {
 // Continuity density: one other particle's or image's terms of d rho_i/dt, at r = xi - x_k within h
 // (k: j's image across the walls of `image`'s bits), added to sum_div and sum_diffusion; the scan's and a reused
 // list's walk's. A wall particle of the bodies (BODIES) is fixed: its velocity here is 0 (wall_pressure.comp's is
-// the viscous term's), and the diffusion is between fluid particles only.
+// the viscous term's). It takes part in the diffusion with the density of its extrapolated pressure, as an image
+// does with its particle's: left out, the fluid at a wall lost density to the kernel's missing half and sank through
+// it (Molteni's term: a 3D tank at rest leaked at 1.5 s, docs/models/walls.md).
 void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, real rhoi, real3 inward,
               inout real sum_div, inout real sum_diffusion) {
     // the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity is mirrored on its
@@ -99,7 +101,7 @@ void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, 
     sum_div += pair_gradient(r2, rlen, image) * v_r;
     // density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an image carries
     // its particle's density, so its hydrostatic difference is its particle's
-    if (DENSITY_DIFFUSION > 0u && !wall_j)
+    if (DENSITY_DIFFUSION > 0u)
         sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
 }
 

@@ -96,7 +96,7 @@ def compute_density(spec, real=np.float32):
         """Continuity density: one other particle's or image's terms of d rho_i/dt, at r = xi - x_k
         within h (k: j's image across the walls of `image`'s bits), added to sum_div and sum_diffusion (returned);
         the scan's and a reused list's walk's. A wall particle of the bodies (BODIES) is fixed: its velocity here is
-        0, and the diffusion is between fluid particles only."""
+        0; it takes part in the diffusion with the density of its extrapolated pressure (as the .comp says why)."""
         # the direction r_hat from the neighbour to i (pairs.glsl); an image's velocity is mirrored on its
         # flipped axes
         rlen = np.sqrt(r2)
@@ -113,7 +113,7 @@ def compute_density(spec, real=np.float32):
         sum_div += pair_gradient(P, r2, rlen, image) * v_r
         # density diffusion D_i (density_diffusion.glsl) at the pair's (or image's) distance; an image carries
         # its particle's density, so its hydrostatic difference is its particle's
-        if DENSITY_DIFFUSION > 0 and not wall_j:
+        if DENSITY_DIFFUSION > 0:
             sum_diffusion += diffusion_term(P, rhoi, particle_rho[j], particle_x[j, 0] - xi_x, particle_x[j, 1] - xi_y,
                                             particle_x[j, 2] - xi_z, r2, rlen)
         return sum_div, sum_diffusion

@@ -170,26 +170,17 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
     adaptive = scene.adaptive_dt  # the device chooses each step (also DFSPH's): run to t_end in simulated time
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     sim = Simulation(scene, s["backend"], **options)
-    rows, wall, k_min, error, signum = [], 0.0, min_neighbours(scene), None, None
+    k_min = min_neighbours(scene)
+
+    def sample(sim):
+        front, height = measure(scene, sim.read()["particle_x"], k_min)
+        t = sim.time
+        return {"t": t, "front_x": front, "column_height": height, "T": t * math.sqrt(2 * G / a), "Z": front / a,
+                "tau": t * math.sqrt(G / a), "H": height / (2 * a)}
+
     try:
-        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress,
-                                        desc=f"dam break {s['dimension']}D [{s['backend']}]") as bar:
-            while True:
-                front, height = measure(scene, sim.read()["particle_x"], k_min)
-                t = sim.time
-                rows.append({"t": t, "front_x": front, "column_height": height, "T": t * math.sqrt(2 * G / a),
-                             "Z": front / a, "tau": t * math.sqrt(G / a), "H": height / (2 * a)})
-                if sim.step_count >= steps if not adaptive else t >= s["t_end"] * (1 - 1e-9):
-                    break
-                k = min(every, steps - sim.step_count) if not adaptive else every
-                start = time.perf_counter()
-                advance(sim, signals, k)  # both backends return when the steps are done
-                wall += time.perf_counter() - start
-                bar.update(k)
-    except SimulationError as e:
-        error = str(e)
-    except Interrupted as e:
-        error, signum = str(e), e.signum
+        rows, wall, error, signum = sampled_run(sim, sample, steps, every, f"dam break {s['dimension']}D "
+                                                f"[{s['backend']}]", progress, s["t_end"] if adaptive else None)
     finally:
         sim.close()
     summary = {"settings": s, "particles": sim.n, "dt": dt, "steps": sim.step_count, "wall_s": wall,
@@ -212,6 +203,29 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
     if error:
         raise stop(summary, out_dir, f"t = {rows[-1]['t']:.4g} s")
     return rows, summary
+
+
+def sampled_run(sim, sample, steps, every, desc, progress, t_end=None):
+    """Sample a run, rows.append(sample(sim)), at the start and every `every` steps up to `steps` steps (with t_end,
+    an adaptive dt's run: up to t_end in simulated time), stepping at safe points (buchner.advance) under a progress
+    bar: (rows, wall seconds stepping, error, signal). A blow-up or a signal ends the run with the rows it has."""
+    rows, wall, error, signum = [], 0.0, None, None
+    try:
+        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress, desc=desc) as bar:
+            while True:
+                rows.append(sample(sim))
+                if sim.step_count >= steps if t_end is None else sim.time >= t_end * (1 - 1e-9):
+                    break
+                k = min(every, steps - sim.step_count) if t_end is None else every
+                start = time.perf_counter()
+                advance(sim, signals, k)  # both backends return when the steps are done
+                wall += time.perf_counter() - start
+                bar.update(k)
+    except SimulationError as e:
+        error = str(e)
+    except Interrupted as e:
+        error, signum = str(e), e.signum
+    return rows, wall, error, signum
 
 
 def rms_z(rows, series="table2", shift=0.0):
