@@ -217,7 +217,8 @@ class Schedule:
         """The progress bar: in steps, or in simulated seconds toward time.end."""
         if self.end_time is None:
             return tqdm(total=self.steps, initial=sim.step_count, unit="step", **options)
-        return tqdm(total=self.end_time, initial=min(t, self.end_time), unit="s", **options)
+        return tqdm(total=self.end_time, initial=min(t, self.end_time), unit="s", **options,
+                    bar_format="{l_bar}{bar}| {n:.3f}/{total:.3g} s [{elapsed}<{remaining}]")
 
     def of(self, sim):
         """Where the run stands against its end, for a message: "of 400", "(t = 0.5 s) of 1 s"."""
