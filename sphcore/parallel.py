@@ -31,8 +31,9 @@ from sphcore.output import SnapshotSeries
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.stepper import LOADED, Simulation
 
-# Launchers' environment variables with the world's size (Open MPI, MPICH/Hydra, Intel MPI, Slurm)
-SIZE_VARIABLES = ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS")
+# Launchers' environment variables with the world's size (Open MPI; MPICH's Hydra and Intel MPI, srun with PMI).
+# Not SLURM_NTASKS: a job's every process sees it, one started without srun too.
+SIZE_VARIABLES = ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE")
 
 
 def launched_ranks():

@@ -104,6 +104,19 @@ def test_load_of_a_subset_steps_it():
         assert np.isfinite(sim.backend.read_buffer("particle_x")).all()
 
 
+def test_launched_ranks_reads_the_launcher(monkeypatch):
+    """`sphcore run` decomposes only under a launcher that says there are several ranks (Open MPI, or PMI's)."""
+    from sphcore import parallel
+    for name in parallel.SIZE_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("SLURM_NTASKS", "8")
+    assert parallel.launched_ranks() == 1
+    monkeypatch.setenv("PMI_SIZE", "3")
+    assert parallel.launched_ranks() == 3
+    monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "4")
+    assert parallel.launched_ranks() == 4
+
+
 def test_what_is_not_decomposed_is_refused():
     from sphcore import parallel
     scene = sphcore.Scene.from_dict(small_dam_break())
