@@ -37,6 +37,19 @@ def differences(given, stored, source, most=2):
 
 def cmd_run(args):
     from sphcore.runner import load_checkpoint, run  # (numba: only where a run starts)
+    from sphcore import parallel
+
+    if parallel.launched_ranks() > 1:  # under mpiexec -n N: one run decomposed over the ranks (sphcore.parallel)
+        if args.resume or args.profile:
+            raise SceneError("--resume and --profile run on one rank: leave out mpiexec")
+        scene = Scene.load(args.scene)
+        out = Path(args.out or Path("runs") / scene["name"])
+        arrays = parallel.main(dict(scene=scene, steps=args.steps, out_dir=out, overwrite=args.overwrite,
+                                    local_size=args.local_size, backend=args.backend or "numba"))
+        if arrays is not None:
+            print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps on "
+                  f"{parallel.launched_ranks()} ranks, t = {float(arrays['time']):.4g} s -> {out}/final.npz")
+        return
 
     scene = Scene.load(args.scene) if args.scene else None
     checkpoint = None

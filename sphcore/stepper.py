@@ -14,7 +14,7 @@ from sphcore.backends import check_options, make_backend
 from sphcore.checkpoint import CARRIED
 from sphcore.errors import CheckpointError, SimulationError
 from sphcore.output import SnapshotSeries
-from sphcore.plan import PARTICLE_BUFFERS, density_stages, empty_state, in_particle_order, plan
+from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, density_stages, empty_state, in_particle_order, plan
 from sphcore.signals import HeldInterrupt
 from sphcore.solvers import solver_for
 from sphcore.sph.dfsph import CONTROL_REBUILD
@@ -24,6 +24,8 @@ from sphcore.surface import particle_surface
 
 # What read() takes from the backend: the per-particle state, the grid's status and the carried buffers.
 READ = tuple(dict.fromkeys((*PARTICLE_BUFFERS, "grid_status", *CARRIED)))
+# The per-particle buffers of CARRIED: what Simulation.load takes.
+LOADED = tuple(name for name in CARRIED if BUFFERS[name][2] == "particles")
 
 
 def _exclusive(method):
@@ -132,6 +134,7 @@ class Simulation:
         self.density_stages = [s for s in density_stages(scene) if s.when != REUSE]  # (a build's: the scan)
         self.backend = make_backend(backend, self.params, state, self.stages, self.spec,
                                     precision=scene["physics.precision"], **backend_options)
+        self.local_size = backend_options.get("local_size", 128)  # (load's new backend)
         del state, x0
         poll()
         if hasattr(self.backend, "warm_up"):
@@ -280,6 +283,36 @@ class Simulation:
         if self.gauges is not None:  # the samples taken so far and each gauge's next time (a resume's rows)
             arrays["gauge_state"] = self.backend.read_buffer("gauge_state")
         return arrays
+
+    @_exclusive
+    def load(self, particles):
+        """Hold another set of particles from now on (numba): `particles` maps every per-particle buffer of
+        CARRIED (LOADED) to an array, rows in any order, with the particles' global ids in particle_id (ids of
+        fluid_count and up are the bodies' wall particles). The other carried buffers (the time, the grid's
+        status, the iteration control) are kept, and the next step builds its neighbour lists. A rank of
+        sphcore.parallel loads its owned and halo particles before each step. The backend is made anew for
+        the new count (the mirrors' compiled code is cached: no compile); n is no closure constant. read() and
+        checkpoint() check and save the whole scene: call them with every particle loaded."""
+        if self.backend.name != "numba":
+            raise SimulationError(f"Simulation.load(): the {self.backend.name} backend cannot change its particle "
+                                  "count yet (its buffers, dispatch sizes and recorded steps are sized at the start)")
+        if self.gauges is not None:
+            raise SimulationError("Simulation.load(): the scene's gauges sample by particle id across the whole "
+                                  "scene; a scene with [[gauges]] cannot load another particle set yet")
+        n = len(particles["particle_id"])
+        params = self.scene.params(n, self.fluid_count)
+        state = empty_state(params, self.scene["physics.precision"], self.scene["domain.obstacles"],
+                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS, None)
+        for name in LOADED:
+            state[name][...] = particles[name]
+        for name in CARRIED:
+            if name not in LOADED:
+                state[name] = self.backend.read_buffer(name)
+        state["control"][CONTROL_REBUILD] = 1  # (the lists of the set held before are of other particles)
+        self.backend.close()
+        self.backend = make_backend("numba", params, state, self.stages, self.spec, local_size=self.local_size,
+                                    precision=self.scene["physics.precision"])
+        self.params, self.n, self._carried = params, n, None
 
     @_exclusive
     def restore(self, arrays):

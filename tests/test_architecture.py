@@ -14,6 +14,7 @@ CORE = ("sph", "mc", "vk_runner", "solvers")
 # (importer, imported) -> why the import waits for the function that needs it
 LAZY = {
     ("sphcore.cli", "sphcore.runner"): "the CLI's start-up: numba loads only for `sphcore run`",
+    ("sphcore.cli", "sphcore.parallel"): "the CLI's start-up: numba loads only for `sphcore run` (under mpiexec)",
     ("sphcore.cli", "sphcore.profile"): "the CLI's start-up: numba loads only for `sphcore run --profile`",
     ("sphcore.cli", "sphcore.plot"): "the CLI's start-up: numba loads only for `sphcore plot`",
     ("sphcore.cli", "sphcore.render"): "the CLI's start-up: numba and pyvista load only for `sphcore render`",

