@@ -41,7 +41,7 @@ from sphcore.gauges import read_csv
 from sphcore.paths import SCENE_DIR
 from sphcore.scene import Scene, SceneError
 from sphcore.validate import dam_break
-from sphcore.validate.buchner import stop, write_results
+from sphcore.validate.buchner import sampled_run, stop, write_results
 
 G = 9.81
 RHO0 = 1000.0
@@ -384,8 +384,8 @@ def run_inclined(s, angle, progress):
     closest = math.nan
     try:
         start_hydrostatic(sim, scene, r, corner, a)
-        rows, wall, error, signum = dam_break.sampled_run(sim, sample, steps, every,
-                                                          f"inclined dam break {angle:g} deg [{s['backend']}]", progress)
+        rows, wall, error, signum = sampled_run(sim, sample, steps, every,
+                                                f"inclined dam break {angle:g} deg [{s['backend']}]", progress)
         if error is None:
             x = sim.read()["particle_x"].astype(np.float64)
             closest = float(geometry.signed_distance(scene.bodies[0], x).min()) / scene["fluid.spacing"]

@@ -229,6 +229,29 @@ def advance(sim, signals, steps):
         signals.stepping = False
 
 
+def sampled_run(sim, sample, steps, every, desc, progress, t_end=None):
+    """Sample a run, rows.append(sample(sim)), at the start and every `every` steps up to `steps` steps (with t_end,
+    an adaptive dt's run: up to t_end in simulated time), stepping at safe points (buchner.advance) under a progress
+    bar: (rows, wall seconds stepping, error, signal). A blow-up or a signal ends the run with the rows it has."""
+    rows, wall, error, signum = [], 0.0, None, None
+    try:
+        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress, desc=desc) as bar:
+            while True:
+                rows.append(sample(sim))
+                if sim.step_count >= steps if t_end is None else sim.time >= t_end * (1 - 1e-9):
+                    break
+                k = min(every, steps - sim.step_count) if t_end is None else every
+                start = time.perf_counter()
+                advance(sim, signals, k)  # both backends return when the steps are done
+                wall += time.perf_counter() - start
+                bar.update(k)
+    except SimulationError as e:
+        error = str(e)
+    except Interrupted as e:
+        error, signum = str(e), e.signum
+    return rows, wall, error, signum
+
+
 def stop(info, out_dir=None, reached=""):
     """The exception that ends a validation run that stopped early, once it wrote its samples (to `reached`,
     e.g. "t = 1.2 s", in out_dir where given): Interrupted where a signal stopped it (the shell's status is

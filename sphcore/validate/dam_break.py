@@ -20,19 +20,15 @@ import csv
 import io
 import json
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 
-from tqdm import tqdm
 
-from sphcore.errors import Interrupted, SimulationError
 from sphcore.output import atomic_savefig, atomic_write_bytes
 from sphcore.scene import Scene, SceneError
-from sphcore.signals import Signals
 from sphcore.validate import DATA_DIR, configs
-from sphcore.validate.buchner import advance, dt_estimate, stop
+from sphcore.validate.buchner import dt_estimate, sampled_run, stop
 
 G = 9.81
 TANK_LENGTH = 8.0  # in units of a
@@ -203,29 +199,6 @@ def run_dam_break(settings=None, out_dir=None, progress=True):
     if error:
         raise stop(summary, out_dir, f"t = {rows[-1]['t']:.4g} s")
     return rows, summary
-
-
-def sampled_run(sim, sample, steps, every, desc, progress, t_end=None):
-    """Sample a run, rows.append(sample(sim)), at the start and every `every` steps up to `steps` steps (with t_end,
-    an adaptive dt's run: up to t_end in simulated time), stepping at safe points (buchner.advance) under a progress
-    bar: (rows, wall seconds stepping, error, signal). A blow-up or a signal ends the run with the rows it has."""
-    rows, wall, error, signum = [], 0.0, None, None
-    try:
-        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress, desc=desc) as bar:
-            while True:
-                rows.append(sample(sim))
-                if sim.step_count >= steps if t_end is None else sim.time >= t_end * (1 - 1e-9):
-                    break
-                k = min(every, steps - sim.step_count) if t_end is None else every
-                start = time.perf_counter()
-                advance(sim, signals, k)  # both backends return when the steps are done
-                wall += time.perf_counter() - start
-                bar.update(k)
-    except SimulationError as e:
-        error = str(e)
-    except Interrupted as e:
-        error, signum = str(e), e.signum
-    return rows, wall, error, signum
 
 
 def rms_z(rows, series="table2", shift=0.0):

@@ -57,14 +57,11 @@ from pathlib import Path
 
 import numpy as np
 
-from tqdm import tqdm
 
-from sphcore.errors import Interrupted, SimulationError
 from sphcore.paths import SCENE_DIR
 from sphcore.scene import Scene
-from sphcore.signals import Signals
 from sphcore.validate import DATA_DIR, configs, sensors
-from sphcore.validate.buchner import advance, dt_estimate, stop
+from sphcore.validate.buchner import dt_estimate, sampled_run, stop
 from sphcore.validate.files import read_csv, read_json
 
 G = 9.81
@@ -196,25 +193,15 @@ def run_spheric(settings=None, out_dir=None, progress=True):
     options = {"device": s.get("device")} if s["backend"] == "vulkan" else {}
     start = time.perf_counter()
     sim = Simulation(scene, s["backend"], **options)
-    rows, wall, error, signum = [], 0.0, None, None
+
+    def sample(sim):
+        state = sim.read()
+        x, p = state["particle_x"].astype(np.float64), state["particle_p"].astype(np.float64)
+        return {"t": sim.time, **water_heights(x, dx, h), **pressures(x, p, h), **obstacle_force(sim)}
+
     try:
-        with Signals() as signals, tqdm(total=steps, unit="step", disable=not progress,
-                                        desc=f"SPHERIC test 2 [{s['backend']}]") as bar:
-            while True:
-                state = sim.read()
-                x, p = state["particle_x"].astype(np.float64), state["particle_p"].astype(np.float64)
-                rows.append({"t": sim.time, **water_heights(x, dx, h), **pressures(x, p, h), **obstacle_force(sim)})
-                if sim.step_count >= steps if not adaptive else sim.time >= s["t_end"] * (1 - 1e-9):
-                    break
-                k = min(every, steps - sim.step_count) if not adaptive else every
-                tick = time.perf_counter()
-                advance(sim, signals, k)
-                wall += time.perf_counter() - tick
-                bar.update(k)
-    except SimulationError as e:
-        error = str(e)
-    except Interrupted as e:
-        error, signum = str(e), e.signum
+        rows, wall, error, signum = sampled_run(sim, sample, steps, every, f"SPHERIC test 2 [{s['backend']}]",
+                                                progress, s["t_end"] if adaptive else None)
     finally:
         device = sim.device_name
         sim.close()
