@@ -1,6 +1,6 @@
 #version 460
 // DFSPH's residual r_i of solve D.level (dfsph.glsl), one invocation per particle: the density
-// ratio's rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (dfsph_factor: the neighbours
+// ratio's rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (walk.glsl: walk_list; dfsph_factor: the neighbours
 // and their wall and obstacle images; an image's velocity mirrored on its flipped axes, as compute_density's
 // continuity rate), summed as v_i . G_i - sum_j V v_j . grad W_ij with G_i = sum_j V grad W_ij, which
 // dfsph_factor stored (particle_gradient_sum): three subtractions fewer a pair.
@@ -43,7 +43,34 @@ layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_c
 layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
 layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };
 layout(std430, binding = 19) readonly buffer ParticleVh { real4 particle_gradient_sum[]; };  // (DFSPH: no Verlet)
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };  // (unread: named by walk.glsl)
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };  // (unread: named by walk.glsl)
+layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  // (unread: named by walk.glsl)
 #include "neighbour_list.glsl"
+
+// i's position, walls, solve and rate, private to the invocation: set by main, read and summed by `list_entry`
+// over the walk
+real3 xi;
+real3 wall;
+real3 inward;
+bool density;
+real d;
+
+// One entry of i's list (walk.glsl: walk_list hands over each slot): the neighbour j, or its image across the
+// walls whose bits are set in `image`, and g = V grad_i W_ik (neighbour_list.glsl); the neighbour's velocity (an
+// image's mirrored on the flipped axes) and V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start).
+void list_entry(uint i, uint slot, inout uvec4 chunk) {
+    uint j;
+    uint image;
+    real3 g = listed_gradient(i, slot, chunk, xi, wall, inward, j, image);
+    real3 vk = density ? particle_vstar[j].xyz : particle_v[j].xyz;
+    if (image != 0u) {
+        vk = real3((image & 1u) != 0u ? -vk.x : vk.x, (image & 2u) != 0u ? -vk.y : vk.y,
+                   (image & 4u) != 0u ? -vk.z : vk.z);
+    }
+    d -= vk.x * g.x + vk.y * g.y + vk.z * g.z;
+}
+#include "walk.glsl"
 
 shared real s_residual[gl_WorkGroupSize.x];
 shared bool s_last;
@@ -60,35 +87,19 @@ void main() {
     if (i < P.n) {
         // [2] the velocity the solve corrects: v (divergence-free), v* = v + dt a (constant density)
         real dt = real(time_state[0].x);
-        bool density = solve == SOLVE_DENSITY;
-        real3 xi = particle_x[i].xyz;
+        density = solve == SOLVE_DENSITY;
+        xi = particle_x[i].xyz;
         real3 vi = density ? particle_vstar[i].xyz : particle_v[i].xyz;
         // [3] the walls and obstacle faces the images are mirrored across, as in compute_density
-        real3 wall;
         uint mirrored = near_walls(xi, wall);
-        real3 inward;
         mirrored = near_obstacles(xi, mirrored, wall, inward);
         // [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
+        //     (walk.glsl: walk_list, list_entry above)
         real3 sum_g = particle_gradient_sum[i].xyz;
-        real d = vi.x * sum_g.x + vi.y * sum_g.y + vi.z * sum_g.z;
+        d = vi.x * sum_g.x + vi.y * sum_g.y + vi.z * sum_g.z;
         uint count = min(neighbour_count[i], MAX_NEIGHBOURS);
-        uvec4 chunk = uvec4(0u);
-        for (uint slot = 0u; slot < count; ++slot) {
-            // [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
-            //     g = V grad_i W_ik (neighbour_list.glsl)
-            uint j;
-            uint image;
-            real3 g = listed_gradient(i, slot, chunk, xi, wall, inward, j, image);
-            // [6] the neighbour's velocity; an image's mirrored on the flipped axes
-            real3 vk = density ? particle_vstar[j].xyz : particle_v[j].xyz;
-            if (image != 0u) {
-                vk = real3((image & 1u) != 0u ? -vk.x : vk.x, (image & 2u) != 0u ? -vk.y : vk.y,
-                           (image & 4u) != 0u ? -vk.z : vk.z);
-            }
-            // [7] V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start)
-            d -= vk.x * g.x + vk.y * g.y + vk.z * g.z;
-        }
-        // [8] the residual: compression only. The constant-density one is `precise` (NoContraction), so
+        walk_list(i, count);
+        // [5] the residual: compression only. The constant-density one is `precise` (NoContraction), so
         //     that a driver computes it as written, as the mirror does: SPIR-V arithmetic not so marked may be
         //     reassociated and fused, and lavapipe's compiler computed (rho_i / rho_0 - 1) + dt d_i. Near rest
         //     that changed the last bit, so the warm start's test residual > 0 flipped for some particles;
@@ -99,14 +110,14 @@ void main() {
             precise real compression = particle_rho[i] / real(P.rest_density) + dt * d - real(1.0);
             residual = max(compression, real(0.0));
         }
-        // [9] store
+        // [6] store
         particle_residual[i] = residual;
     }
     s_residual[lid] = residual;
     barrier();
-    // [10] invocation 0: the group's residuals in order, its part of the solve's error; made visible, then
-    //      the group counted as finished: the last one to finish (the count's old value one short of the
-    //      groups) runs the check. Which group that is varies; what it computes does not
+    // [7] invocation 0: the group's residuals in order, its part of the solve's error; made visible, then
+    //     the group counted as finished: the last one to finish (the count's old value one short of the
+    //     groups) runs the check. Which group that is varies; what it computes does not
     uint groups = (P.n + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
     if (lid == 0u) {
         real total = real(0.0);
@@ -117,8 +128,8 @@ void main() {
         memoryBarrierBuffer();
     }
     barrier();
-    // [11] the last group: the convergence test over every group's sum (dfsph_check.glsl), each
-    //      invocation its share, then invocation 0 the error and the stop; the count reset for the next
+    // [8] the last group: the convergence test over every group's sum (dfsph_check.glsl), each
+    //     invocation its share, then invocation 0 the error and the stop; the count reset for the next
     if (!s_last) return;
     s_sum[lid] = dfsph_check_share(lid, groups);
     barrier();

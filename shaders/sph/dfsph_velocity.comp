@@ -2,7 +2,7 @@
 // One Jacobi update of DFSPH's solve D.level (dfsph.glsl), one invocation per particle: with the
 // stiffness s_j = alpha_j r_j (divergence-free, [1/s]) or alpha_j r_j / dt^2 (constant density, [1/s^2])
 // of every particle from the last dfsph_residual, the change -sum_j V (s_i + s_j) grad W_ij over the
-// neighbour list (dfsph_factor: the neighbours and their wall and obstacle images; an image carries its
+// neighbour list (walk.glsl: walk_list; dfsph_factor: the neighbours and their wall and obstacle images; an image carries its
 // particle's s) is added to the velocity (divergence-free) or to the acceleration the step integrates
 // (constant density, which also accumulates the pressure p_i += s_i rho_i^2 / rho_0: the state equation's
 // m p_i / rho_i^2 = V s_i, and keeps v* = v + dt a in scratch_v for the next residual: dfsph_predict).
@@ -37,7 +37,36 @@ layout(std430, binding = 29) readonly buffer Neighbours { uint neighbours[]; };
 layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
 layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };
+layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };  // (unread: named by walk.glsl)
+layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };  // (unread: named by walk.glsl)
+layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };  // (unread: named by walk.glsl)
 #include "neighbour_list.glsl"
+
+// i's position, walls, stiffness and change, private to the invocation: set by main, read and summed by
+// `list_entry` over the walk
+real3 xi;
+real3 wall;
+real3 inward;
+bool warm;
+real scale;
+real si;
+real3 change;
+
+// One entry of i's list (walk.glsl: walk_list hands over each slot): the neighbour j (or its image: the same s_j)
+// and g = V grad_i W_ij (neighbour_list.glsl); -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood.
+void list_entry(uint i, uint slot, inout uvec4 chunk) {
+    uint j;
+    uint image;
+    real3 g = listed_gradient(i, slot, chunk, xi, wall, inward, j, image);
+    real sj = scale * particle_alpha[j] * particle_residual[j];
+    if (warm) {
+        real kappa_j = particle_kappa[j];  // (read before the test: a select, not a branch that mispredicts)
+        sj = particle_residual[j] > real(0.0) ? kappa_j : real(0.0);
+    }
+    real t = si + sj;
+    change -= t * g;
+}
+#include "walk.glsl"
 
 void main() {
     // [1] one invocation per particle (none once the solve has stopped: its dispatch is indirect);
@@ -45,39 +74,24 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     uint solve = D.level;
-    bool warm = solve == SOLVE_WARM_START;  // the warm start: always, and not counted
+    warm = solve == SOLVE_WARM_START;  // the warm start: always, and not counted
     if (!warm && i == 0u) control[CONTROL_ITERATIONS + solve] += 1u;
     // [2] the stiffness scale: 1 (divergence-free), 1 / dt^2 (constant density); own stiffness s_i (warm
     //     start: the stiffness sum, particle_kappa, where the particle is compressed: residual > 0)
     real dt = real(time_state[0].x);
-    real scale = solve == SOLVE_DIVERGENCE ? real(1.0) : real(1.0) / (dt * dt);
-    real si = scale * particle_alpha[i] * particle_residual[i];
+    scale = solve == SOLVE_DIVERGENCE ? real(1.0) : real(1.0) / (dt * dt);
+    si = scale * particle_alpha[i] * particle_residual[i];
     if (warm) si = particle_residual[i] > real(0.0) ? particle_kappa[i] : real(0.0);
-    real3 xi = particle_x[i].xyz;
+    xi = particle_x[i].xyz;
     // [3] the walls and obstacle faces the images are mirrored across, as in compute_density
-    real3 wall;
     uint mirrored = near_walls(xi, wall);
-    real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
-    real3 change = real3(0.0);
+    //     (walk.glsl: walk_list, list_entry above)
+    change = real3(0.0);
     uint count = min(neighbour_count[i], MAX_NEIGHBOURS);
-    uvec4 chunk = uvec4(0u);
-    for (uint slot = 0u; slot < count; ++slot) {
-        // [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
-        uint j;
-        uint image;
-        real3 g = listed_gradient(i, slot, chunk, xi, wall, inward, j, image);
-        // [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
-        real sj = scale * particle_alpha[j] * particle_residual[j];
-        if (warm) {
-            real kappa_j = particle_kappa[j];  // (read before the test: a select, not a branch that mispredicts)
-            sj = particle_residual[j] > real(0.0) ? kappa_j : real(0.0);
-        }
-        real t = si + sj;
-        change -= t * g;
-    }
-    // [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+    walk_list(i, count);
+    // [5] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
     //     (constant density; only the warm start reads the sum of others, and it writes none)
     if (solve == SOLVE_DIVERGENCE) {
         particle_v[i] = real4(particle_v[i].xyz + change, 0.0);

@@ -1,6 +1,6 @@
-// The neighbour lists (dfsph.glsl: written by compute_density's scan), walked by compute_forces, and under
-// DFSPH by dfsph_factor (which stores each entry's gradient), dfsph_residual and dfsph_velocity (which read
-// them). Needs particle_x, neighbours, neighbour_chunks (the same buffer as uvec4) and neighbour_gradients
+// The neighbour lists (dfsph.glsl: written by compute_density's scan), walked (walk.glsl) by compute_forces and
+// wall_pressure, by compute_density between builds of reused lists, and under DFSPH by dfsph_factor (which stores
+// each entry's gradient), dfsph_residual and dfsph_velocity (which read them). Needs particle_x, neighbours, neighbour_chunks (the same buffer as uvec4) and neighbour_gradients
 // declared by the shader that includes this file (after cells.glsl, kernels.glsl, pairs.glsl and dfsph.glsl).
 // A walk goes through the slots from 0 in order, keeping the last chunk it loaded in `chunk`.
 // Mirror: sphcore/sph/neighbour_list.py (same names, same statements).

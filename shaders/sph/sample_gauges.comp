@@ -39,6 +39,7 @@ layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 32) readonly buffer GaugeTable { vec4 gauge_table[]; };
 layout(std430, binding = 33) buffer GaugeState { uvec4 gauge_state[]; };
 layout(std430, binding = 34) writeonly buffer GaugeSamples { real4 gauge_samples[]; };
+#include "cell_ranges.glsl"
 
 const uint PRESSURE = 0u;  // sphcore.gauges.QUANTITIES
 const uint VELOCITY = 1u;
@@ -61,15 +62,9 @@ real4 point_sums(real3 x, out real3 sum_v) {
     sum_v = real3(0.0);
     ivec3 base = cell_of(x);
     for (uint k = 0u; k < range_count(); ++k) {
-        uint start = 0u;
-        uint end = P.n;
-        if (GRID) {
-            int first;
-            int last;
-            if (!range_cells(base, k, first, last)) continue;
-            start = cell_start[first];
-            end = cell_start[last] + cell_pyramid[last];
-        }
+        uint start;
+        uint end;
+        if (!cell_range(base, k, start, end)) continue;  // (cell_ranges.glsl)
         for (uint j = start; j < end; ++j) {
             real3 r = x - particle_x[j].xyz;
             real r2 = r.x * r.x + r.y * r.y + r.z * r.z;

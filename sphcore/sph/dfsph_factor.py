@@ -1,7 +1,7 @@
 """DFSPH's factor alpha_i (Bender & Koschier 2017, eq. 11) times omega = fluid.relaxation, one invocation per
 particle, after compute_density; invocation 0 also starts the step's two solves (dfsph.py: their flags, counts and
 indirect dispatches), and every particle's pressure starts from 0. The sums walk the particle's neighbour
-list, which compute_density's scan wrote and every sweep of the solves walks too (dfsph.py). The sum of each
+list (walk.py: walk_list), which compute_density's scan wrote and every sweep of the solves walks too (dfsph.py). The sum of each
 particle's V grad W_ij goes to particle_gradient_sum (dfsph_residual).
 
 Mirror of shaders/sph/dfsph_factor.comp: same names, same statement order, same step labels.
@@ -20,6 +20,7 @@ from sphcore.sph.dfsph import (CONTROL_DONE, CONTROL_ITERATIONS, CONTROL_OVERFLO
 from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.walk import list_walk
 
 
 @lru_cache(maxsize=None)
@@ -30,6 +31,35 @@ def dfsph_factor(spec, real=np.float32):
     list_slot = list_slots(spec)
     pair_gradient = kernels(spec, real).pair_gradient
     listed_pair = neighbour_list(spec, real).listed_pair
+
+    @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
+    def list_entry(own, state, i, slot, chunk):
+        """One entry of i's list (walk.py: walk_list hands over each slot): the neighbour j, or its image, and the
+        direction from it to i (neighbour_list.py); g = V grad_i W_ij into the sums, and with GRADIENTS stored at
+        the entry's slot. Returns (chunk, the sums)."""
+        P, particle_x, neighbours, neighbour_gradients, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, \
+            inward_z, coef = own
+        sum_grad_x, sum_grad_y, sum_grad_z, sum_grad2 = state
+        chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
+            P, particle_x, neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
+            inward_y, inward_z)
+        g = coef * pair_gradient(P, r2, rlen, image)
+        grad_x = g * r_hat_x
+        grad_y = g * r_hat_y
+        grad_z = g * r_hat_z
+        sum_grad_x -= grad_x
+        sum_grad_y -= grad_y
+        sum_grad_z -= grad_z
+        sum_grad2 += g * g
+        if GRADIENTS:
+            k = list_slot(P, i, slot)
+            neighbour_gradients[k, 0] = -grad_x
+            neighbour_gradients[k, 1] = -grad_y
+            neighbour_gradients[k, 2] = -grad_z
+            neighbour_gradients[k, 3] = real(0.0)
+        return chunk, (sum_grad_x, sum_grad_y, sum_grad_z, sum_grad2)
+
+    walk_list = list_walk(list_entry)
 
     @njit
     def dfsph_factor_main(i, local_size, params, particle_x, particle_p, obstacle_box,
@@ -59,40 +89,20 @@ def dfsph_factor(spec, real=np.float32):
         # [3] sums over the particle's list (compute_density wrote it this step, in its scan's order: every
         #     other particle and every image within h) of g = V grad_i W_ij = -coef kernel_gradient r_hat
         #     (coef = pressure_coef / rho_0): their sum, and the sum of |g|^2; with GRADIENTS each g stored for
-        #     the solves' sweeps (the positions do not move before integrate)
+        #     the solves' sweeps (the positions do not move before integrate); walk.py: walk_list, list_entry above
         coef = real(P.pressure_coef) / real(P.rest_density)
-        sum_grad_x = real(0.0)
-        sum_grad_y = real(0.0)
-        sum_grad_z = real(0.0)
-        sum_grad2 = real(0.0)
+        zero = real(0.0)
         count = int(neighbour_count[i])
-        chunk = (0, 0, 0, 0)
-        for slot in range(min(count, MAX_NEIGHBOURS)):
-            # [4] the neighbour j, or its image, and the direction from it to i (neighbour_list.glsl)
-            chunk, j, image, r_x, r_y, r_z, r2, rlen, r_hat_x, r_hat_y, r_hat_z = listed_pair(
-                P, particle_x, neighbours, i, slot, chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
-                inward_y, inward_z)
-            g = coef * pair_gradient(P, r2, rlen, image)
-            grad_x = g * r_hat_x
-            grad_y = g * r_hat_y
-            grad_z = g * r_hat_z
-            sum_grad_x -= grad_x
-            sum_grad_y -= grad_y
-            sum_grad_z -= grad_z
-            sum_grad2 += g * g
-            if GRADIENTS:
-                k = list_slot(P, i, slot)
-                neighbour_gradients[k, 0] = -grad_x
-                neighbour_gradients[k, 1] = -grad_y
-                neighbour_gradients[k, 2] = -grad_z
-                neighbour_gradients[k, 3] = real(0.0)
-        # [5] alpha_i, relaxed; 0 for a particle (nearly) alone, whose residual is 0 anyway
+        sum_grad_x, sum_grad_y, sum_grad_z, sum_grad2 = walk_list(
+            i, min(count, MAX_NEIGHBOURS), (P, particle_x, neighbours, neighbour_gradients, xi_x, xi_y, xi_z, wall_x,
+                                            wall_y, wall_z, inward_x, inward_y, inward_z, coef), (zero, zero, zero, zero))
+        # [4] alpha_i, relaxed; 0 for a particle (nearly) alone, whose residual is 0 anyway
         s = sum_grad_x * sum_grad_x + sum_grad_y * sum_grad_y + sum_grad_z * sum_grad_z + sum_grad2
         alpha = real(0.0)
         if s > real(1e-6) / real(P.h2):
             alpha = real(1.0) / s
         alpha *= real(dfsph_state[STATE_RELAXATION])
-        # [6] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
+        # [5] store; the pressure starts from 0 and the stiffness sum from WARM_START times the last step's
         #     (dfsph_velocity accumulates both)
         particle_alpha[i] = alpha
         particle_gradient_sum[i, 0] = sum_grad_x
@@ -101,7 +111,7 @@ def dfsph_factor(spec, real=np.float32):
         particle_gradient_sum[i, 3] = real(0.0)
         particle_p[i] = real(0.0)
         particle_kappa[i] = real(WARM_START) * particle_kappa[i]
-        # [7] a list too long for its MAX_NEIGHBOURS slots marks the step (the same value from every
+        # [6] a list too long for its MAX_NEIGHBOURS slots marks the step (the same value from every
         #     invocation that writes it), and the host stops the run
         if count > MAX_NEIGHBOURS and control[CONTROL_OVERFLOW_STEP] == 0:
             control[CONTROL_OVERFLOW_STEP] = control[CONTROL_STEP] + 1

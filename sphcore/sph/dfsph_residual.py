@@ -1,6 +1,6 @@
 """DFSPH's residual r_i of solve D.level (dfsph.py), one invocation per particle: the density ratio's
-rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list, each gradient as dfsph_factor computes it
-(stored in neighbour_gradients with GRADIENTS), summed as v_i . G_i - sum_j V v_j . grad W_ij with dfsph_factor's
+rate d_i = sum_j V (v_i - v_j) . grad W_ij over its neighbour list (walk.py: walk_list), each gradient as
+dfsph_factor computes it (stored in neighbour_gradients with GRADIENTS), summed as v_i . G_i - sum_j V v_j . grad W_ij with dfsph_factor's
 G_i = sum_j V grad W_ij (particle_gradient_sum); divergence-free solve
 r_i = max(d_i, 0), constant-density solve r_i = max(rho_i / rho_0 + dt d_i* - 1, 0) with v* = v + dt a (in
 scratch_v: dfsph_predict, dfsph_velocity);
@@ -26,6 +26,7 @@ from sphcore.sph.dfsph import SOLVE_DENSITY
 from sphcore.sph.dfsph_check import dfsph_check
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.walk import list_walk
 
 
 @lru_cache(maxsize=None)
@@ -36,6 +37,30 @@ def dfsph_residual(spec, real=np.float32):
     listed_gradient = neighbour_list(spec, real).listed_gradient
     dfsph_check_share = dfsph_check(spec, real).dfsph_check_share
     dfsph_check_decide = dfsph_check(spec, real).dfsph_check_decide
+
+    @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
+    def list_entry(own, state, i, slot, chunk):
+        """One entry of i's list (walk.py: walk_list hands over each slot): the neighbour j, or its image across the
+        walls whose bits are set in `image`, and g = V grad_i W_ik (neighbour_list.py); the neighbour's velocity (an
+        image's mirrored on the flipped axes) and V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start).
+        Returns (chunk, d)."""
+        P, particle_x, particle_v, particle_vstar, neighbours, neighbour_gradients, xi_x, xi_y, xi_z, wall_x, wall_y, \
+            wall_z, inward_x, inward_y, inward_z, density = own
+        d = state
+        chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, neighbours, neighbour_gradients, i, slot, chunk,
+                                                         xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
+                                                         inward_z)
+        vk_x = particle_vstar[j, 0] if density else particle_v[j, 0]
+        vk_y = particle_vstar[j, 1] if density else particle_v[j, 1]
+        vk_z = particle_vstar[j, 2] if density else particle_v[j, 2]
+        if image != 0:
+            vk_x = -vk_x if (image & 1) != 0 else vk_x
+            vk_y = -vk_y if (image & 2) != 0 else vk_y
+            vk_z = -vk_z if (image & 4) != 0 else vk_z
+        d -= vk_x * g_x + vk_y * g_y + vk_z * g_z
+        return chunk, d
+
+    walk_list = list_walk(list_entry)
 
     @njit
     def dfsph_residual_main(i, params, particle_x, particle_v, particle_vstar, particle_rho, obstacle_box, time_state,
@@ -63,43 +88,29 @@ def dfsph_residual(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] d_i over the neighbour list (dfsph_factor): every other particle and every image within h
+        #     (walk.py: walk_list, list_entry above)
         sum_g_x = particle_gradient_sum[i, 0]
         sum_g_y = particle_gradient_sum[i, 1]
         sum_g_z = particle_gradient_sum[i, 2]
         d = vi_x * sum_g_x + vi_y * sum_g_y + vi_z * sum_g_z
         count = min(int(neighbour_count[i]), MAX_NEIGHBOURS)
-        chunk = (0, 0, 0, 0)
-        for slot in range(count):
-            # [5] the neighbour j, or its image across the walls whose bits are set in `image`, and
-            #     g = V grad_i W_ik (neighbour_list.glsl)
-            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, neighbours, neighbour_gradients, i, slot,
-                                                             chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
-                                                             inward_y, inward_z)
-            # [6] the neighbour's velocity; an image's mirrored on the flipped axes
-            vk_x = particle_vstar[j, 0] if density else particle_v[j, 0]
-            vk_y = particle_vstar[j, 1] if density else particle_v[j, 1]
-            vk_z = particle_vstar[j, 2] if density else particle_v[j, 2]
-            if image != 0:
-                vk_x = -vk_x if (image & 1) != 0 else vk_x
-                vk_y = -vk_y if (image & 2) != 0 else vk_y
-                vk_z = -vk_z if (image & 4) != 0 else vk_z
-            # [7] V (v_i - v_k) . grad_i W_ik, less v_i's part (in d from the start)
-            d -= vk_x * g_x + vk_y * g_y + vk_z * g_z
-        # [8] the residual: compression only. The constant-density one is `precise` in the shader (no
+        d = walk_list(i, count, (P, particle_x, particle_v, particle_vstar, neighbours, neighbour_gradients, xi_x, xi_y,
+                                 xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z, density), d)
+        # [5] the residual: compression only. The constant-density one is `precise` in the shader (no
         #     reassociation, no fused multiply-add: the order written here; issue 30)
         residual = max(d, real(0.0))
         if density:
             compression = particle_rho[i] / real(P.rest_density) + dt * d - real(1.0)
             residual = max(compression, real(0.0))
-        # [9] store
+        # [6] store
         particle_residual[i] = residual
         return residual
 
     @njit
     def dfsph_residual_partial(group, local_size, dfsph_partial, s_residual):
-        # [10] invocation 0: the group's residuals in order, its part of the solve's error; made visible, then
-        #      the group counted as finished: the last one to finish (the count's old value one short of the
-        #      groups) runs the check. Which group that is varies; what it computes does not
+        # [7] invocation 0: the group's residuals in order, its part of the solve's error; made visible, then
+        #     the group counted as finished: the last one to finish (the count's old value one short of the
+        #     groups) runs the check. Which group that is varies; what it computes does not
         total = real(0.0)
         for k in range(local_size):
             total += s_residual[k]
@@ -122,8 +133,8 @@ def dfsph_residual(spec, real=np.float32):
         if n_groups == 0:
             return
         # (barrier)
-        # [11] the last group: the convergence test over every group's sum (dfsph_check.glsl), each
-        #      invocation its share, then invocation 0 the error and the stop; the count reset for the next
+        # [8] the last group: the convergence test over every group's sum (dfsph_check.glsl), each
+        #     invocation its share, then invocation 0 the error and the stop; the count reset for the next
         s_sum = np.empty(local_size, real)  # the last group's shared memory
         for lid in range(local_size):
             s_sum[lid] = dfsph_check_share(lid, groups, local_size, dfsph_partial)

@@ -1,5 +1,5 @@
 """One Jacobi update of DFSPH's solve D.level (dfsph.py), one invocation per particle: the change
--sum_j V (s_i + s_j) grad W_ij over its neighbour list, each gradient as dfsph_factor computes it (stored in
+-sum_j V (s_i + s_j) grad W_ij over its neighbour list (walk.py: walk_list), each gradient as dfsph_factor computes it (stored in
 neighbour_gradients with GRADIENTS), s_j = alpha_j r_j (divergence-free)
 or alpha_j r_j / dt^2 (constant density), added to the velocity (divergence-free) or to the acceleration,
 with the pressure accumulated and v* = v + dt a kept in scratch_v for the next residual (constant density,
@@ -18,6 +18,7 @@ from sphcore.sph.cells import cells
 from sphcore.sph.dfsph import CONTROL_ITERATIONS, SOLVE_DIVERGENCE, SOLVE_WARM_START
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
+from sphcore.sph.walk import list_walk
 from sphcore.workgroups import launcher
 
 
@@ -27,6 +28,29 @@ def dfsph_velocity(spec, real=np.float32):
     near_walls = cells(spec, real).near_walls
     near_obstacles = obstacles(spec, real).near_obstacles
     listed_gradient = neighbour_list(spec, real).listed_gradient
+
+    @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
+    def list_entry(own, state, i, slot, chunk):
+        """One entry of i's list (walk.py: walk_list hands over each slot): the neighbour j (or its image: the same
+        s_j) and g = V grad_i W_ij (neighbour_list.py); -V (s_i + s_j) grad_i W_ij: away from a compressed
+        neighbourhood. Returns (chunk, change)."""
+        P, particle_x, particle_alpha, particle_residual, particle_kappa, neighbours, neighbour_gradients, xi_x, xi_y, \
+            xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z, warm, scale, si = own
+        change_x, change_y, change_z = state
+        chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, neighbours, neighbour_gradients, i, slot, chunk,
+                                                         xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y,
+                                                         inward_z)
+        sj = scale * particle_alpha[j] * particle_residual[j]
+        if warm:
+            kappa_j = particle_kappa[j]  # (read before the test: a select, not a branch that mispredicts)
+            sj = kappa_j if particle_residual[j] > real(0.0) else real(0.0)
+        t = si + sj
+        change_x -= t * g_x
+        change_y -= t * g_y
+        change_z -= t * g_z
+        return chunk, (change_x, change_y, change_z)
+
+    walk_list = list_walk(list_entry)
 
     @njit
     def dfsph_velocity_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, obstacle_box,
@@ -57,26 +81,14 @@ def dfsph_velocity(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] the change over the neighbour list (dfsph_factor): every other particle and every image within h
-        change_x = real(0.0)
-        change_y = real(0.0)
-        change_z = real(0.0)
+        #     (walk.py: walk_list, list_entry above)
+        zero = real(0.0)
         count = min(int(neighbour_count[i]), MAX_NEIGHBOURS)
-        chunk = (0, 0, 0, 0)
-        for slot in range(count):
-            # [5] the neighbour j (or its image: the same s_j) and g = V grad_i W_ij (neighbour_list.glsl)
-            chunk, j, image, g_x, g_y, g_z = listed_gradient(P, particle_x, neighbours, neighbour_gradients, i, slot,
-                                                             chunk, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x,
-                                                             inward_y, inward_z)
-            # [6] -V (s_i + s_j) grad_i W_ij: away from a compressed neighbourhood
-            sj = scale * particle_alpha[j] * particle_residual[j]
-            if warm:
-                kappa_j = particle_kappa[j]  # (read before the test: a select, not a branch that mispredicts)
-                sj = kappa_j if particle_residual[j] > real(0.0) else real(0.0)
-            t = si + sj
-            change_x -= t * g_x
-            change_y -= t * g_y
-            change_z -= t * g_z
-        # [7] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
+        change_x, change_y, change_z = walk_list(
+            i, count, (P, particle_x, particle_alpha, particle_residual, particle_kappa, neighbours, neighbour_gradients,
+                       xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z, warm, scale, si),
+            (zero, zero, zero))
+        # [5] store: the velocity (divergence-free) or the acceleration, the stiffness sum and the pressure
         #     (constant density; only the warm start reads the sum of others, and it writes none)
         if solve == SOLVE_DIVERGENCE:
             particle_v[i, 0] = particle_v[i, 0] + change_x

@@ -1,5 +1,6 @@
-"""The neighbour lists (dfsph.py: written by compute_density's scan), walked by compute_forces, and under
-DFSPH by dfsph_factor, dfsph_residual and dfsph_velocity (with GRADIENTS the factor stores each entry's
+"""The neighbour lists (dfsph.py: written by compute_density's scan), walked (walk.py) by compute_forces and
+wall_pressure, by compute_density between builds of reused lists, and under DFSPH by dfsph_factor, dfsph_residual
+and dfsph_velocity (with GRADIENTS the factor stores each entry's
 gradient, which the sweeps read). GLSL reads particle_x, neighbours and neighbour_gradients as buffers the
 including shader declares; here they are arguments, after the parameter block.
 

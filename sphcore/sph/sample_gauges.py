@@ -13,6 +13,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.cell_ranges import cell_ranges
 from sphcore.sph.cells import cells
 from sphcore.sph.kernels import kernels
 from sphcore.workgroups import launcher
@@ -23,10 +24,10 @@ PRESSURE, VELOCITY, DENSITY, HEIGHT, FORCE, MOMENT = range(6)  # sphcore.gauges.
 
 @lru_cache(maxsize=None)
 def sample_gauges(spec, real=np.float32):
-    GRID, BODIES = spec.GRID, spec.BODIES
+    BODIES = spec.BODIES
     cell_of = cells(spec, real).cell_of
     range_count = cells(spec, real).range_count
-    range_cells = cells(spec, real).range_cells
+    cell_range = cell_ranges(spec, real)
     kernel_w = kernels(spec, real).kernel_w
 
     @njit
@@ -44,14 +45,9 @@ def sample_gauges(spec, real=np.float32):
         sum_v_x = sum_v_y = sum_v_z = real(0.0)
         base_x, base_y, base_z = cell_of(P, x_x, x_y, x_z)
         for k in range(range_count()):
-            start = 0
-            end = int(P.n)
-            if GRID:
-                inside, first, last = range_cells(P, base_x, base_y, base_z, k)
-                if not inside:
-                    continue
-                start = int(cell_start[first])
-                end = int(cell_start[last]) + int(cell_pyramid[last])
+            inside, start, end = cell_range(P, cell_pyramid, cell_start, base_x, base_y, base_z, k)
+            if not inside:
+                continue  # (cell_ranges.glsl)
             for j in range(start, end):
                 r_x = x_x - particle_x[j, 0]
                 r_y = x_y - particle_x[j, 1]
