@@ -9,9 +9,7 @@
 // lists (MAX_NEIGHBOURS > 0: DFSPH, and the state equation where they fit, Scene.spec_for) the scan also writes the
 // particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists
 // reused between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps
-// where each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells. The
-// scan and the walk of a reused list are walk.glsl's (walk_scan with this stage's `pair` and `scan_range`, walk_list
-// with its `list_entry`).
+// where each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells.
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -107,90 +105,14 @@ void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, 
         sum_diffusion += diffusion_term(rhoi, particle_rho[j], particle_x[j].xyz - xi, r2, rlen);
 }
 
-// i's state, walls, sums and list, private to the invocation: set by main, read and summed by `pair` over the
-// scan (walk.glsl: walk_scan), `scan_range` before each of its ranges and `list_entry` over a reused list's walk
-real3 xi;
-real3 vi;
-real rhoi;
-real3 wall;
-real3 inward;
-bool walk;
-real reach2;
-real sum_w;
-real sum_div;
-real sum_diffusion;
-uint found;
-uint fingerprint;
-uint count;
-bool listing;
-uvec4 chunk;
-
-// One candidate of the scan (walk.glsl: walk_scan): within h (self too), kernel_w into the sum, with
-// NEIGHBOUR_STATS counted and hashed; each of the others into the list (a build of reused lists: out to
-// list_reach), by chunks of 4 where CHUNKED; continuity: the others' rates (add_rate: the velocity divergence,
-// d rho_i/dt, and the density diffusion D_i). Listing first (LIST_FIRST): every candidate into the next slot,
-// kept by one within h.
-void pair(uint i, uint j, uint image, real3 r, real r2, real3 inward) {
-    if (listing) {
-        neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
-        count += uint(r2 < P.h2);
-        return;
-    }
-    bool within = r2 < P.h2;
-    if (within || (LIST_SKIN > 0u && !walk && r2 < reach2)) {
-        if (!CONTINUITY && within) sum_w += kernel_w(r2);
-        if (NEIGHBOUR_STATS && within) {
-            found += 1u;
-            fingerprint += neighbour_hash(particle_id[j], image);
-        }
-        if (MAX_NEIGHBOURS > 0u && !walk && (j != i || image != 0u)) {
-            if (count < MAX_NEIGHBOURS) {
-                uint entry = j | (image << IMAGE_SHIFT);
-                if (CHUNKED) {
-                    chunk[count & 3u] = entry;
-                    if ((count & 3u) == 3u) neighbour_chunks[chunk_index(i, count)] = chunk;
-                } else {
-                    neighbours[list_slot(i, count)] = entry;
-                }
-            }
-            count += 1u;
-        }
-    }
-    if (CONTINUITY && within && (j != i || image != 0u)) add_rate(i, j, image, r, r2, xi, vi, rhoi, inward, sum_div,
-                                                                 sum_diffusion);
-}
-
-// Before a range of the scan [start, end) that could fill a list-first scan's list: the list summed now
-// (listed_sum), and the rest scanned with the branch.
-void scan_range(uint i, uint start, uint end) {
-    if (listing && count + (end - start) > MAX_NEIGHBOURS) {
-        count = listed_sum(i, xi, wall, count, sum_w);
-        listing = false;
-    }
-}
-
-// One entry of a reused list (walk.glsl: walk_list hands over each slot): the particle or image, if now within
-// h, into the sums (continuity: its rates, add_rate).
-void list_entry(uint i, uint slot, inout uvec4 chunk) {
-    uint j;
-    uint image;
-    real3 r;
-    real r2 = listed_distance(i, slot, chunk, xi, wall, j, image, r);
-    if (r2 >= P.h2) return;
-    if (!CONTINUITY) sum_w += kernel_w(r2);
-    if (CONTINUITY) add_rate(i, j, image, r, r2, xi, vi, rhoi, inward, sum_div, sum_diffusion);
-}
-#define WALK_SCAN_RANGE
-#include "walk.glsl"
-
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
     // [2] own position; with continuity density also the velocity and the density (state)
-    xi = particle_x[i].xyz;
-    vi = real3(0.0);
-    rhoi = real(0.0);
+    real3 xi = particle_x[i].xyz;
+    real3 vi = real3(0.0);
+    real rhoi = real(0.0);
     if (CONTINUITY) {
         vi = particle_v[i].xyz;
         rhoi = particle_rho[i];
@@ -200,44 +122,109 @@ void main() {
     //     that the wall nearer to xi on axis a is within h; an obstacle's face in front of xi
     //     takes the place of its axis's wall where nearer (obstacles.glsl). Reused lists (LIST_SKIN): the walls
     //     within list_reach of where i was at the list's build (this step's position at a build, D.level 0)
-    walk = LIST_SKIN > 0u && D.level == 1u;
+    bool walk = LIST_SKIN > 0u && D.level == 1u;
     real3 x_built = walk ? scratch_x[i].xyz : xi;
+    real3 wall;
     uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
+    real3 inward;
     mirrored = near_obstacles(xi, mirrored, wall, inward);
     // [4] sum kernel_w over every particle and image within h, self included (with
-    //     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint).
+    //     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
+    //     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
+    //     is within h of xi's own image xm, so the cells searched are those around xm.
     //     Continuity: sum the velocity divergence and the diffusion term over the others instead.
     //     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
     //     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4). A build of
     //     reused lists lists the others within list_reach
-    sum_w = real(0.0);
-    sum_div = real(0.0);
-    sum_diffusion = real(0.0);
-    found = 0u;
-    fingerprint = 0u;
-    count = 0u;
-    listing = LIST_FIRST;
-    chunk = uvec4(0u);
-    reach2 = list_reach() * list_reach();
+    real sum_w = real(0.0);
+    real sum_div = real(0.0);
+    real sum_diffusion = real(0.0);
+    uint found = 0u;
+    uint fingerprint = 0u;
+    uint count = 0u;
+    bool listing = LIST_FIRST;
+    uvec4 chunk = uvec4(0u);
+    real reach2 = list_reach() * list_reach();
     bool scanning = true;
     if (walk) {  // [5] a reused list: self, and the listed particles and images now within h, in the list's order
-                 //     (walk.glsl: walk_list, list_entry above; continuity: the others' rates, add_rate); a list
-                 //     that overflowed at its build scans the cells of the build around x_built instead
+                 //     (continuity: the others' rates, add_rate); a list that overflowed at its build scans the
+                 //     cells of the build around x_built instead
         count = neighbour_count[i];
         scanning = count > MAX_NEIGHBOURS;
     }
     if (!scanning) {
         sum_w = kernel_w(real(0.0));
-        walk_list(i, count);
+        for (uint slot = 0u; slot < count; ++slot) {
+            uint j;
+            uint image;
+            real3 r;
+            real r2 = listed_distance(i, slot, chunk, xi, wall, j, image, r);
+            if (r2 >= P.h2) continue;
+            if (!CONTINUITY) sum_w += kernel_w(r2);
+            if (CONTINUITY) add_rate(i, j, image, r, r2, xi, vi, rhoi, inward, sum_div, sum_diffusion);
+        }
     }
-    // [6] else the scan (walk.glsl: walk_scan; `pair` and `scan_range` above): self included, every candidate
-    //     while listing first, else those within h, or at a build of reused lists within list_reach
-    walk_scan(i, xi, x_built, wall, mirrored, inward, scanning, true, LIST_FIRST,
-              LIST_SKIN > 0u && !walk ? reach2 : real(P.h2));
+    for (uint image = 0u; image < 8u; ++image) {
+        if (!scanning || (image & ~mirrored) != 0u) continue;
+        real3 xm = reflected(x_built, wall, image);
+        ivec3 base = cell_of(xm);
+        // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        for (uint k = 0u; k < range_count(); ++k) {
+            uint start = 0u;
+            uint end = P.n;
+            if (GRID) {
+                int first;
+                int last;
+                if (!range_cells(base, k, first, last)) continue;
+                start = cell_start[first];
+                end = cell_start[last] + cell_pyramid[last];
+            }
+            if (listing && count + (end - start) > MAX_NEIGHBOURS) {  // the list may fill: summed now, and the
+                count = listed_sum(i, xi, wall, count, sum_w);          // rest scanned with the branch
+                listing = false;
+            }
+            for (uint j = start; j < end; ++j) {
+                real3 xk = particle_x[j].xyz;
+                if (image != 0u) xk = reflected(xk, wall, image);
+                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                real3 r = xi - xk;
+                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                if (listing) {  // (list first: every candidate into the next slot, kept by one within h)
+                    neighbours[list_slot(i, count)] = j | (image << IMAGE_SHIFT);
+                    count += uint(r2 < P.h2);
+                    continue;
+                }
+                bool within = r2 < P.h2;
+                if (within || (LIST_SKIN > 0u && !walk && r2 < reach2)) {
+                    if (!CONTINUITY && within) sum_w += kernel_w(r2);
+                    if (NEIGHBOUR_STATS && within) {
+                        found += 1u;
+                        fingerprint += neighbour_hash(particle_id[j], image);
+                    }
+                    if (MAX_NEIGHBOURS > 0u && !walk && (j != i || image != 0u)) {
+                        if (count < MAX_NEIGHBOURS) {
+                            uint pair = j | (image << IMAGE_SHIFT);
+                            if (CHUNKED) {
+                                chunk[count & 3u] = pair;
+                                if ((count & 3u) == 3u) neighbour_chunks[chunk_index(i, count)] = chunk;
+                            } else {
+                                neighbours[list_slot(i, count)] = pair;
+                            }
+                        }
+                        count += 1u;
+                    }
+                }
+                // [7] continuity: the rates of the others within h (add_rate: the velocity divergence, d rho_i/dt,
+                //     and the density diffusion D_i)
+                if (CONTINUITY && within && (j != i || image != 0u)) add_rate(i, j, image, r, r2, xi, vi, rhoi, inward,
+                                                                             sum_div, sum_diffusion);
+            }
+        }
+    }
     if (listing) count = listed_sum(i, xi, wall, count, sum_w);
     uint kept = min(count, MAX_NEIGHBOURS);
     if (CHUNKED && !walk && (kept & 3u) != 0u) neighbour_chunks[chunk_index(i, kept)] = chunk;  // (the last chunk's rest: unread)
-    // [7] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+    // [8] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
     //     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
     real rho = P.density_coef * sum_w;
     real drho = real(0.0);
@@ -246,10 +233,10 @@ void main() {
         drho = -P.pressure_coef * sum_div;
         if (DENSITY_DIFFUSION > 0u) drho += P.diffusion_coef * sum_diffusion;
     }
-    // [8] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+    // [9] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
     //     density only)
     real p = equation_of_state(rho);
-    // [9] store
+    // [10] store
     if (!CONTINUITY) particle_rho[i] = rho;
     particle_p[i] = p;
     if (CONTINUITY) particle_drho[i] = drho;

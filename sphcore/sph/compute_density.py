@@ -5,9 +5,7 @@ The kernel is kernels.glsl's (KERNEL). Summation density, or with CONTINUITY the
 (DENSITY_DIFFUSION). With neighbour lists (MAX_NEIGHBOURS > 0) the scan also writes each particle's
 list (dfsph.py), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists reused
 between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps where
-each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells. The scan
-and the walk of a reused list are walk.py's (walk_scan with this stage's `pair` and `scan_range`, walk_list with
-its `list_entry`).
+each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells.
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -25,7 +23,6 @@ from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
-from sphcore.sph.walk import list_walk, scan_walk
 from sphcore.workgroups import launcher
 
 
@@ -47,13 +44,19 @@ def can_list_first(spec):
 
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
-    NEIGHBOUR_STATS = spec.NEIGHBOUR_STATS
+    GRID, NEIGHBOUR_STATS = spec.GRID, spec.NEIGHBOUR_STATS
+    cell_of = cells(spec, real).cell_of
     near_walls = cells(spec, real).near_walls
+    reflected = cells(spec, real).reflected
+    range_count = cells(spec, real).range_count
+    range_cells = cells(spec, real).range_cells
     near_walls_within = skin(spec, real).near_walls_within
     list_reach = skin(spec, real).list_reach
     listed_distance = neighbour_list(spec, real).listed_distance
     LIST_SKIN = spec.LIST_SKIN
     near_obstacles = obstacles(spec, real).near_obstacles
+    solid = obstacles(spec, real).solid
+    OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION, BODIES = spec.CONTINUITY, spec.DENSITY_DIFFUSION, spec.BODIES
     MAX_NEIGHBOURS = spec.MAX_NEIGHBOURS
     # A scan with no branch on the distance (BRANCH_FREE_SCAN, where the list is written and the density summed):
@@ -115,78 +118,6 @@ def compute_density(spec, real=np.float32):
                                             particle_x[j, 2] - xi_z, r2, rlen)
         return sum_div, sum_diffusion
 
-    @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
-    def pair(own, state, i, j, image, r_x, r_y, r_z, r2, inward_x, inward_y, inward_z):
-        """One candidate of the scan (walk.py: walk_scan): within h (self too), kernel_w into the sum, with
-        NEIGHBOUR_STATS counted and hashed; each of the others into the list (a build of reused lists: out to
-        list_reach), by chunks of 4 where CHUNKED; continuity: the others' rates (add_rate). Listing first
-        (LIST_FIRST): every candidate into the next slot, kept by one within h. Returns the sums and the list's
-        state."""
-        (P, particle_x, particle_v, particle_rho, particle_id, neighbours, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
-         wall_x, wall_y, wall_z, walk, reach2) = own
-        sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk = state
-        if listing:
-            neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
-            count += int(r2 < P.h2)
-            return sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk
-        within = r2 < P.h2
-        if within or (LIST_SKIN > 0 and not walk and r2 < reach2):
-            if not CONTINUITY and within:
-                sum_w += kernel_w(P, r2)
-            if NEIGHBOUR_STATS and within:
-                found += 1
-                fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
-            if MAX_NEIGHBOURS > 0 and not walk and (j != i or image != 0):
-                if count < MAX_NEIGHBOURS:
-                    entry = j | (image << IMAGE_SHIFT)
-                    if CHUNKED:
-                        chunk = with_lane(chunk, count & 3, entry)
-                        if (count & 3) == 3:
-                            store_chunk(P, neighbours, i, count, chunk)
-                    else:
-                        neighbours[list_slot(P, i, count)] = entry
-                count += 1
-        if CONTINUITY and within and (j != i or image != 0):
-            sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x,
-                                              r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi, inward_x,
-                                              inward_y, inward_z, sum_div, sum_diffusion)
-        return sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk
-
-    @njit(inline="always")
-    def scan_range(own, state, i, start, end):
-        """Before a range of the scan [start, end) that could fill a list-first scan's list: the list summed now
-        (listed_sum), and the rest scanned with the branch. Returns the sums and the list's state."""
-        (P, particle_x, particle_v, particle_rho, particle_id, neighbours, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
-         wall_x, wall_y, wall_z, walk, reach2) = own
-        sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk = state
-        if listing and count + (end - start) > MAX_NEIGHBOURS:
-            count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z, count,
-                                      sum_w)
-            listing = False
-        return sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk
-
-    @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
-    def list_entry(own, state, i, slot, chunk):
-        """One entry of a reused list (walk.py: walk_list hands over each slot): the particle or image, if now
-        within h, into the sums (continuity: its rates, add_rate). Returns (chunk, the sums)."""
-        (P, particle_x, particle_v, particle_rho, particle_id, neighbours, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
-         wall_x, wall_y, wall_z, inward_x, inward_y, inward_z) = own
-        sum_w, sum_div, sum_diffusion = state
-        chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, neighbours, i, slot, chunk, xi_x, xi_y,
-                                                             xi_z, wall_x, wall_y, wall_z)
-        if r2 >= P.h2:
-            return chunk, state
-        if not CONTINUITY:
-            sum_w += kernel_w(P, r2)
-        if CONTINUITY:
-            sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x,
-                                              r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi, inward_x,
-                                              inward_y, inward_z, sum_div, sum_diffusion)
-        return chunk, (sum_w, sum_div, sum_diffusion)
-
-    walk_scan = scan_walk(spec, real, pair, scan_range)
-    walk_list = list_walk(list_entry)
-
     @njit
     def compute_density_main(i, params, particle_x, particle_v, particle_rho, particle_p, cell_pyramid, cell_start,
                              scratch_x, particle_id, particle_neighbours, obstacle_box, particle_drho, control,
@@ -225,7 +156,9 @@ def compute_density(spec, real=np.float32):
         mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
             P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
         # [4] sum kernel_w over every particle and image within h, self included (with
-        #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint).
+        #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
+        #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
+        #     is within h of xi's own image xm, so the cells searched are those around xm.
         #     Continuity: sum the velocity divergence and the diffusion term over the others instead.
         #     Lists: each of the others into the list, in the scan's order, j | image << IMAGE_SHIFT
         #     (LIST_FIRST: every candidate first, summed from the list after; CHUNKED: by chunks of 4). A build of
@@ -241,32 +174,86 @@ def compute_density(spec, real=np.float32):
         reach2 = list_reach(P) * list_reach(P)
         scanning = True
         if walk:  # [5] a reused list: self, and the listed particles and images now within h, in the list's order
-            #         (walk.py: walk_list, list_entry above; continuity: the others' rates, add_rate); a list
-            #         that overflowed at its build scans the cells of the build around x_built instead
+            #         (continuity: the others' rates, add_rate); a list that overflowed at its build scans the
+            #         cells of the build around x_built instead
             count = int(neighbour_count[i])
             scanning = count > MAX_NEIGHBOURS
         if not scanning:
             sum_w = kernel_w(P, real(0.0))
-            sum_w, sum_div, sum_diffusion = walk_list(
-                i, count, (P, particle_x, particle_v, particle_rho, particle_id, neighbours, xi_x, xi_y, xi_z, vi_x,
-                           vi_y, vi_z, rhoi, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z),
-                (sum_w, sum_div, sum_diffusion))
-        # [6] else the scan (walk.py: walk_scan; `pair` and `scan_range` above): self included, every candidate
-        #     while listing first, else those within h, or at a build of reused lists within list_reach
-        sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk = walk_scan(
-            P, particle_x, cell_pyramid, cell_start, obstacle_box, i, xi_x, xi_y, xi_z, x_built_x, x_built_y, x_built_z,
-            wall_x, wall_y, wall_z, mirrored, inward_x, inward_y, inward_z, scanning, True, LIST_FIRST,
-            reach2 if LIST_SKIN > 0 and not walk else real(P.h2),
-            (P, particle_x, particle_v, particle_rho, particle_id, neighbours, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
-             wall_x, wall_y, wall_z, walk, reach2),
-            (sum_w, sum_div, sum_diffusion, found, fingerprint, count, listing, chunk))
+            for slot in range(count):
+                chunk, j, image, r_x, r_y, r_z, r2 = listed_distance(P, particle_x, neighbours, i, slot, chunk,
+                                                                     xi_x, xi_y, xi_z, wall_x, wall_y, wall_z)
+                if r2 >= P.h2:
+                    continue
+                if not CONTINUITY:
+                    sum_w += kernel_w(P, r2)
+                if CONTINUITY:
+                    sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x, r_y,
+                                                      r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi, inward_x,
+                                                      inward_y, inward_z, sum_div, sum_diffusion)
+        for image in range(8):
+            if not scanning or (image & ~mirrored) != 0:
+                continue
+            xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            for k in range(range_count()):
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                    if not inside:
+                        continue
+                    start = int(cell_start[first])
+                    end = int(cell_start[last]) + int(cell_pyramid[last])
+                if listing and count + (end - start) > MAX_NEIGHBOURS:  # the list may fill: summed now, and the
+                    count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y,
+                                              wall_z, count, sum_w)  # rest scanned with the branch
+                    listing = False
+                for j in range(start, end):
+                    xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
+                    if image != 0:
+                        xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if listing:  # (list first: every candidate into the next slot, kept by one within h)
+                        neighbours[list_slot(P, i, count)] = j | (image << IMAGE_SHIFT)
+                        count += int(r2 < P.h2)
+                        continue
+                    within = r2 < P.h2
+                    if within or (LIST_SKIN > 0 and not walk and r2 < reach2):
+                        if not CONTINUITY and within:
+                            sum_w += kernel_w(P, r2)
+                        if NEIGHBOUR_STATS and within:
+                            found += 1
+                            fingerprint = (fingerprint + neighbour_hash(np.int64(particle_id[j]), image)) & 0xFFFFFFFF
+                        if MAX_NEIGHBOURS > 0 and not walk and (j != i or image != 0):
+                            if count < MAX_NEIGHBOURS:
+                                pair = j | (image << IMAGE_SHIFT)
+                                if CHUNKED:
+                                    chunk = with_lane(chunk, count & 3, pair)
+                                    if (count & 3) == 3:
+                                        store_chunk(P, neighbours, i, count, chunk)
+                                else:
+                                    neighbours[list_slot(P, i, count)] = pair
+                            count += 1
+                    # [7] continuity: the rates of the others within h (add_rate: the velocity divergence, d rho_i/dt,
+                    #     and the density diffusion D_i)
+                    if CONTINUITY and within and (j != i or image != 0):
+                        sum_div, sum_diffusion = add_rate(P, particle_x, particle_v, particle_rho, particle_id, i, j, image, r_x,
+                                                          r_y, r_z, r2, xi_x, xi_y, xi_z, vi_x, vi_y, vi_z, rhoi,
+                                                          inward_x, inward_y, inward_z, sum_div, sum_diffusion)
         if listing:
             count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y, wall_z,
                                       count, sum_w)
         kept = min(count, MAX_NEIGHBOURS)
         if CHUNKED and not walk and (kept & 3) != 0:
             store_chunk(P, neighbours, i, kept, chunk)  # (the last chunk's rest: unread)
-        # [7] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
+        # [8] summation: rho_i = m sum_j W(r_ij, h); continuity: the state's rho_i, and its rate (which
         #     integrate_density, the next stage, adds: it needs every neighbour's density unchanged here)
         rho = P.density_coef * sum_w
         drho = real(0.0)
@@ -275,10 +262,10 @@ def compute_density(spec, real=np.float32):
             drho = -P.pressure_coef * sum_div
             if DENSITY_DIFFUSION > 0:
                 drho += P.diffusion_coef * sum_diffusion
-        # [8] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
+        # [9] equation of state (equation_of_state.glsl: linear or Tait; clamped at 0 with summation
         #     density only)
         p = equation_of_state_(P, rho)
-        # [9] store
+        # [10] store
         if not CONTINUITY:
             particle_rho[i] = rho
         particle_p[i] = p
