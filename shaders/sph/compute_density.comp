@@ -10,6 +10,7 @@
 // particle's list (dfsph.glsl), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists
 // reused between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps
 // where each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells.
+// The scan is walk.glsl's written out, not called through its hooks (walk.glsl says why: 6 % of this stage).
 // Mirror: sphcore/sph/compute_density.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -43,6 +44,7 @@ layout(std430, binding = 30) buffer NeighbourCount { uint neighbour_count[]; };
 layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };  // (unread: named by
                                                                                            // neighbour_list.glsl)
 #include "neighbour_list.glsl"
+#include "cell_ranges.glsl"
 
 // Order-independent fingerprint of a neighbour (id, image): a 32-bit mix summed over the set.
 uint neighbour_hash(uint id, uint image) {
@@ -168,17 +170,11 @@ void main() {
         if (!scanning || (image & ~mirrored) != 0u) continue;
         real3 xm = reflected(x_built, wall, image);
         ivec3 base = cell_of(xm);
-        // [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+        // [6] the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
         for (uint k = 0u; k < range_count(); ++k) {
-            uint start = 0u;
-            uint end = P.n;
-            if (GRID) {
-                int first;
-                int last;
-                if (!range_cells(base, k, first, last)) continue;
-                start = cell_start[first];
-                end = cell_start[last] + cell_pyramid[last];
-            }
+            uint start;
+            uint end;
+            if (!cell_range(base, k, start, end)) continue;
             if (listing && count + (end - start) > MAX_NEIGHBOURS) {  // the list may fill: summed now, and the
                 count = listed_sum(i, xi, wall, count, sum_w);          // rest scanned with the branch
                 listing = false;

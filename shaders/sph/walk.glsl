@@ -1,30 +1,29 @@
-// The one neighbour walk (TrixiParticles' foreach_neighbor): the pair loops of every SPH stage go through it.
+// The neighbour walk (TrixiParticles' foreach_neighbor), two entry points:
 //   walk_neighbours(i, xi): every other particle and every wall or obstacle image within h of particle i, each
-//     handed to `pair` (compute_forces, wall_pressure). With neighbour lists (MAX_NEIGHBOURS > 0,
-//     Scene.spec_for) it reads i's list as compute_density wrote it this step (neighbour_list.glsl: the pairs of
-//     the scan, in its order, so the same bits; reused lists, LIST_SKIN: the pairs of the list now within h). A
-//     particle with more neighbours than its list's slots, and every particle without lists, is scanned
-//     (walk_scan) around x_built (where i was at the list's build with reused lists, else xi).
-//   walk_scan(...): the scan that walk_neighbours is built on, which compute_density calls itself: it scans its own
-//     x_built (a build's is this step's position), keeps i itself (its density sums it), reaches out to list_reach
-//     at a reused list's build, and lists first (LIST_FIRST: every candidate to `pair`, which tests the distance).
-//     The images are those of `mirrored`'s bits (cells.glsl: near_walls; obstacles.glsl: near_obstacles), the
-//     cells the 3^dim around each image of x_built (cell_ranges.glsl), or all pairs without the grid.
+//     handed to `pair` (compute_forces, wall_pressure). With neighbour lists (MAX_NEIGHBOURS > 0, Scene.spec_for)
+//     it reads i's list as compute_density wrote it this step (neighbour_list.glsl: the pairs of compute_density's
+//     scan, in its order, so the same bits; reused lists, LIST_SKIN: the pairs of the list now within h). A
+//     particle with more neighbours than its list's slots, and every particle without lists, is scanned: the images
+//     of `mirrored`'s bits (cells.glsl: near_walls; obstacles.glsl: near_obstacles) and the 3^dim cells around each
+//     image of x_built (where i was at the list's build with reused lists, else xi; cell_ranges.glsl), or all pairs
+//     without the grid.
 //   walk_list(i, count): i's list slot by slot, each slot to `list_entry` (the DFSPH sweeps dfsph_factor,
-//     dfsph_residual and dfsph_velocity; compute_density's reused lists). An entry point apart from
-//     walk_neighbours' list loop because these need the slot, which `pair` does not get: dfsph_factor stores each
-//     entry's gradient at it, and with GRADIENTS the solves read it there without loading the neighbour's
-//     position (neighbour_list.glsl: listed_gradient).
-// The including shader defines the hooks it calls before this file:
+//     dfsph_residual and dfsph_velocity). Apart from walk_neighbours' list loop because these need the slot, which
+//     `pair` does not get: dfsph_factor stores each entry's gradient at it, and with GRADIENTS the solves read it
+//     there without loading the neighbour's position (neighbour_list.glsl: listed_gradient).
+// compute_density scans with its own loop, the walk's scan written out: it keeps i itself, writes the lists (list
+// first, by chunks, out to list_reach at a reused list's build) and sums in the scan's order. The same scan through
+// walk.glsl's hooks, its sums and list in private globals, cost that stage 6 % on an H200 (0.409 to 0.434 ms a step
+// at 1 M particles, benchmarks/gpu_step_ab.sh; writing its chunk by selects instead: 0.460), so it stays written out.
+// The including shader defines the hook it calls before this file:
 //     void pair(uint i, uint j, uint image, real3 r, real r2, real3 inward)
 //     void list_entry(uint i, uint slot, inout uvec4 chunk)
-//     void scan_range(uint i, uint start, uint end)   (with #define WALK_SCAN_RANGE; else it does nothing)
 // (j: the neighbour, `image`: the walls and obstacle faces it is mirrored across, r = x_i - x_k, r2 = |r|^2,
-// `inward`: near_obstacles' normals, for pairs.glsl's direction where the two coincide; scan_range: before each
-// range [start, end) of sorted particles). A hook is declared here, so a shader that calls one entry point need
-// not define the other's (a function that no code reaches needs no body). `pair` loads what it needs of j
-// first, then takes rlen = sqrt(r2) and the direction (pairs.glsl: pair_direction), and adds the pair's terms
-// (pressure.glsl, viscosity.glsl, ...) to the shader's sums, private globals set before the walk.
+// `inward`: near_obstacles' normals, for pairs.glsl's direction where the two coincide). Both are declared here, so
+// a shader that calls one entry point need not define the other's hook (a function no code reaches needs no body).
+// `pair` loads what it needs of j first, then takes rlen = sqrt(r2) and the direction (pairs.glsl:
+// pair_direction), and adds the pair's terms (pressure.glsl, viscosity.glsl, ...) to the shader's sums, private
+// globals set before the walk.
 // Needs particle_x, scratch_x, cell_pyramid, cell_start, obstacle_box and the lists' buffers declared by the shader,
 // after cells.glsl, kernels.glsl, pairs.glsl, obstacles.glsl and neighbour_list.glsl.
 // Mirror: sphcore/sph/walk.py (same names, same statements).
@@ -32,39 +31,6 @@
 
 void pair(uint i, uint j, uint image, real3 r, real r2, real3 inward);
 void list_entry(uint i, uint slot, inout uvec4 chunk);
-#ifndef WALK_SCAN_RANGE
-void scan_range(uint i, uint start, uint end) {}
-#endif
-
-// Hands the particles and images around x_built's images at r2 < reach2 from xi to `pair` in the scan's order
-// (none unless `scanning`): others only, unless self_too; every candidate, whatever its distance, where `every`.
-void walk_scan(uint i, real3 xi, real3 x_built, real3 wall, uint mirrored, real3 inward, bool scanning, bool self_too,
-               bool every, real reach2) {
-    // image `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j is within h of
-    // xi's own image xm, so the cells searched are those around xm
-    for (uint image = 0u; image < 8u; ++image) {
-        if (!scanning || (image & ~mirrored) != 0u) continue;
-        real3 xm = reflected(x_built, wall, image);
-        ivec3 base = cell_of(xm);
-        // the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
-        for (uint k = 0u; k < range_count(); ++k) {
-            uint start;
-            uint end;
-            if (!cell_range(base, k, start, end)) continue;
-            scan_range(i, start, end);
-            for (uint j = start; j < end; ++j) {
-                if (!self_too && j == i && image == 0u) continue;
-                real3 xk = particle_x[j].xyz;
-                if (image != 0u) xk = reflected(xk, wall, image);
-                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
-                real3 r = xi - xk;
-                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
-                if (!every && r2 >= reach2) continue;
-                pair(i, j, image, r, r2, inward);
-            }
-        }
-    }
-}
 
 // Hands every other particle and image within h of i (at xi) to `pair`, in the list's or the scan's order.
 void walk_neighbours(uint i, real3 xi) {
@@ -81,7 +47,29 @@ void walk_neighbours(uint i, real3 xi) {
     // which the GPU's compiler keeps the two loops apart: with reused lists, where both end alike, the other
     // order cost compute_forces 8 % on an H200, issue 31)
     bool listed = MAX_NEIGHBOURS > 0u && neighbour_count[i] <= MAX_NEIGHBOURS;
-    walk_scan(i, xi, x_built, wall, mirrored, inward, !listed, false, false, real(P.h2));
+    // the scan: image `image` mirrors the axes of its bits; the image of j is within h of xi exactly when
+    // j is within h of xi's own image xm, so the cells searched are those around xm
+    for (uint image = 0u; image < 8u; ++image) {
+        if (listed || (image & ~mirrored) != 0u) continue;
+        real3 xm = reflected(x_built, wall, image);
+        ivec3 base = cell_of(xm);
+        // the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
+        for (uint k = 0u; k < range_count(); ++k) {
+            uint start;
+            uint end;
+            if (!cell_range(base, k, start, end)) continue;
+            for (uint j = start; j < end; ++j) {
+                if (j == i && image == 0u) continue;
+                real3 xk = particle_x[j].xyz;
+                if (image != 0u) xk = reflected(xk, wall, image);
+                if (OBSTACLES > 0u && image != 0u && !solid(xk)) continue;  // (obstacles.glsl)
+                real3 r = xi - xk;
+                real r2 = r.x * r.x + r.y * r.y + r.z * r.z;
+                if (r2 >= P.h2) continue;
+                pair(i, j, image, r, r2, inward);
+            }
+        }
+    }
     // the list
     if (listed) {
         uint count = neighbour_count[i];

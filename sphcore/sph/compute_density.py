@@ -5,7 +5,8 @@ The kernel is kernels.glsl's (KERNEL). Summation density, or with CONTINUITY the
 (DENSITY_DIFFUSION). With neighbour lists (MAX_NEIGHBOURS > 0) the scan also writes each particle's
 list (dfsph.py), which compute_forces walks, and under DFSPH dfsph_factor and the solves. Lists reused
 between builds (LIST_SKIN, cells.glsl: list_reach): a build (D.level 0) lists out to list_reach and keeps where
-each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells.
+each particle was (scratch_x); a step between builds (D.level 1) walks the lists instead of the cells. The scan is
+walk.py's written out, not called through its hooks (walk.glsl says why).
 
 Mirror of shaders/sph/compute_density.comp: same names, same statement order, same step
 labels. A GLSL vec3 local `v` is `v_x, v_y, v_z` here.
@@ -15,6 +16,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.cell_ranges import cell_ranges
 from sphcore.sph.cells import cells, skin
 from sphcore.sph.density_diffusion import density_diffusion
 from sphcore.sph.dfsph import CONTROL_BUILDS, IMAGE_SHIFT, list_slots, store_chunk, with_lane
@@ -44,12 +46,12 @@ def can_list_first(spec):
 
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
-    GRID, NEIGHBOUR_STATS = spec.GRID, spec.NEIGHBOUR_STATS
+    NEIGHBOUR_STATS = spec.NEIGHBOUR_STATS
     cell_of = cells(spec, real).cell_of
     near_walls = cells(spec, real).near_walls
     reflected = cells(spec, real).reflected
     range_count = cells(spec, real).range_count
-    range_cells = cells(spec, real).range_cells
+    cell_range = cell_ranges(spec, real)
     near_walls_within = skin(spec, real).near_walls_within
     list_reach = skin(spec, real).list_reach
     listed_distance = neighbour_list(spec, real).listed_distance
@@ -196,16 +198,11 @@ def compute_density(spec, real=np.float32):
                 continue
             xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells)
+            # [6] the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
             for k in range(range_count()):
-                start = 0
-                end = int(P.n)
-                if GRID:
-                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
-                    if not inside:
-                        continue
-                    start = int(cell_start[first])
-                    end = int(cell_start[last]) + int(cell_pyramid[last])
+                inside, start, end = cell_range(P, cell_pyramid, cell_start, base_x, base_y, base_z, k)
+                if not inside:
+                    continue
                 if listing and count + (end - start) > MAX_NEIGHBOURS:  # the list may fill: summed now, and the
                     count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y,
                                               wall_z, count, sum_w)  # rest scanned with the branch

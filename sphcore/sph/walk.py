@@ -1,13 +1,11 @@
-"""The one neighbour walk (TrixiParticles' foreach_neighbor): the pair loops of every SPH stage go through it.
-walk_neighbours: every other particle and every wall or obstacle image within h of particle i, each handed to
-`pair`, in the list's or the scan's order (compute_forces, wall_pressure); walk_scan, the scan it is built on,
-which compute_density calls itself; walk_list, the list slot by slot (the DFSPH sweeps, compute_density's reused
-lists). walk.glsl says what each serves and why.
+"""The neighbour walk (TrixiParticles' foreach_neighbor): walk_neighbours, every other particle and every wall or
+obstacle image within h of particle i, each handed to `pair`, in the list's or the scan's order (compute_forces,
+wall_pressure); walk_list, the list slot by slot (the DFSPH sweeps). walk.glsl says what each serves, and why
+compute_density scans with its own loop.
 
 numba has no function the shader's globals could name, so the walk is made per caller: `walk(spec, real, pair)`
-(walk_neighbours) and `scan_walk(spec, real, pair, scan_range)` (walk_scan) close over the caller's njit'ed
+(walk_neighbours) closes over the caller's njit'ed
     pair(own, state, i, j, image, r_x, r_y, r_z, r2, inward_x, inward_y, inward_z) -> state
-    scan_range(own, state, i, start, end) -> state   (walk's: this file's, which does nothing)
 where `own` is a tuple of what the hooks read (i's state, the buffers) and `state` the tuple of the sums, which
 the shader keeps in private globals; the walks return the sums. `list_walk(list_entry)` (walk_list) closes over
     list_entry(own, state, i, slot, chunk) -> (chunk, state)
@@ -24,70 +22,19 @@ from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 
 
-@njit(inline="always")
-def scan_range(own, state, i, start, end):
-    """Before each range of the scan: nothing, for a caller that defines none (walk.glsl: WALK_SCAN_RANGE)."""
-    return state
-
-
 @lru_cache(maxsize=None)
-def scan_walk(spec, real, pair, scan_range):
-    OBSTACLES = spec.OBSTACLES
+def walk(spec, real, pair):
+    OBSTACLES, MAX_NEIGHBOURS, LIST_SKIN = spec.OBSTACLES, spec.MAX_NEIGHBOURS, spec.LIST_SKIN
     cell_of = cells(spec, real).cell_of
     reflected = cells(spec, real).reflected
     range_count = cells(spec, real).range_count
     cell_range = cell_ranges(spec, real)
     solid = obstacles(spec, real).solid
-
-    @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
-    def walk_scan(P, particle_x, cell_pyramid, cell_start, obstacle_box, i, xi_x, xi_y, xi_z, x_built_x, x_built_y,
-                  x_built_z, wall_x, wall_y, wall_z, mirrored, inward_x, inward_y, inward_z, scanning, self_too, every,
-                  reach2, own, state):
-        """Hands the particles and images around x_built's images at r2 < reach2 from xi to `pair` in the scan's
-        order (none unless `scanning`): others only, unless self_too; every candidate, whatever its distance,
-        where `every`. Returns the sums `state`."""
-        # image `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j is within h
-        # of xi's own image xm, so the cells searched are those around xm
-        for image in range(8):
-            if not scanning or (image & ~mirrored) != 0:
-                continue
-            xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
-            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
-            for k in range(range_count()):
-                inside, start, end = cell_range(P, cell_pyramid, cell_start, base_x, base_y, base_z, k)
-                if not inside:
-                    continue
-                state = scan_range(own, state, i, start, end)
-                for j in range(start, end):
-                    if not self_too and j == i and image == 0:
-                        continue
-                    xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
-                    if image != 0:
-                        xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
-                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
-                        continue  # (obstacles.glsl)
-                    r_x = xi_x - xk
-                    r_y = xi_y - yk
-                    r_z = xi_z - zk
-                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
-                    if not every and r2 >= reach2:
-                        continue
-                    state = pair(own, state, i, j, image, r_x, r_y, r_z, r2, inward_x, inward_y, inward_z)
-        return state
-
-    return walk_scan
-
-
-@lru_cache(maxsize=None)
-def walk(spec, real, pair):
-    MAX_NEIGHBOURS, LIST_SKIN = spec.MAX_NEIGHBOURS, spec.LIST_SKIN
     near_obstacles = obstacles(spec, real).near_obstacles
     near_walls = cells(spec, real).near_walls
     near_walls_within = skin(spec, real).near_walls_within
     list_reach = skin(spec, real).list_reach
     listed_distance = neighbour_list(spec, real).listed_distance
-    walk_scan = scan_walk(spec, real, pair, scan_range)
 
     @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
     def walk_neighbours(P, particle_x, scratch_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i,
@@ -109,9 +56,33 @@ def walk(spec, real, pair):
         # i's list where it fits its slots, else the scan (below: the list's loop after the scan's, as in
         # walk.glsl, where that order is the GPU's faster one)
         listed = MAX_NEIGHBOURS > 0 and int(neighbour_count[i]) <= MAX_NEIGHBOURS
-        state = walk_scan(P, particle_x, cell_pyramid, cell_start, obstacle_box, i, xi_x, xi_y, xi_z, x_built_x,
-                          x_built_y, x_built_z, wall_x, wall_y, wall_z, mirrored, inward_x, inward_y, inward_z,
-                          not listed, False, False, real(P.h2), own, state)
+        # the scan: image `image` mirrors the axes of its bits; the image of j is within h of xi exactly
+        # when j is within h of xi's own image xm, so the cells searched are those around xm
+        for image in range(8):
+            if listed or (image & ~mirrored) != 0:
+                continue
+            xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
+            base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
+            # the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
+            for k in range(range_count()):
+                inside, start, end = cell_range(P, cell_pyramid, cell_start, base_x, base_y, base_z, k)
+                if not inside:
+                    continue
+                for j in range(start, end):
+                    if j == i and image == 0:
+                        continue
+                    xk, yk, zk = particle_x[j, 0], particle_x[j, 1], particle_x[j, 2]
+                    if image != 0:
+                        xk, yk, zk = reflected(xk, yk, zk, wall_x, wall_y, wall_z, image)
+                    if OBSTACLES > 0 and image != 0 and not solid(P, obstacle_box, xk, yk, zk):
+                        continue  # (obstacles.glsl)
+                    r_x = xi_x - xk
+                    r_y = xi_y - yk
+                    r_z = xi_z - zk
+                    r2 = r_x * r_x + r_y * r_y + r_z * r_z
+                    if r2 >= P.h2:
+                        continue
+                    state = pair(own, state, i, j, image, r_x, r_y, r_z, r2, inward_x, inward_y, inward_z)
         # the list
         if listed:
             count = int(neighbour_count[i])
