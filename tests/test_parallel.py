@@ -292,13 +292,15 @@ def two_ranks(scene_file, out, env, *options):
 
 @pytest.mark.vulkan
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-def test_dam_break_on_two_ranks_on_lavapipe(tmp_path):
-    """The 2D dam break on 2 ranks on Vulkan (both on lavapipe here): bitwise the 1-rank driver on Vulkan, and
-    bitwise the 2-rank run on numba."""
+@pytest.mark.parametrize("config", [small_dam_break(), small_dam_break_3d()], ids=["2d", "3d"])
+def test_dam_break_on_two_ranks_on_lavapipe(tmp_path, config):
+    """The 2D and 3D dam breaks on 2 ranks on Vulkan (both on lavapipe here): bitwise the 1-rank driver on Vulkan,
+    and bitwise the 2-rank run on numba."""
     from conftest import vulkan_or_skip
     vulkan_or_skip()
     scene_file = tmp_path / "dam.toml"
-    scene_file.write_text(toml(small_dam_break()))
+    scene_file.write_text(toml(config))
+    steps = config["time"]["steps"]
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
     subprocess.run([sys.executable, "-c", ONE_RANK, str(scene_file), str(tmp_path / "one"), "vulkan"], env=env,
                    check=True, timeout=900)
@@ -306,7 +308,7 @@ def test_dam_break_on_two_ranks_on_lavapipe(tmp_path):
         run = two_ranks(scene_file, tmp_path / backend, env, "--backend", backend)
         assert run.returncode == 0, run.stderr[-2000:]
     one, two, cpu = (np.load(tmp_path / run / "final.npz") for run in ("one", "vulkan", "numba"))
-    assert int(two["step"]) == 200
+    assert int(two["step"]) == steps
     for name in ("position", "velocity", "density", "pressure", "time", "dt"):
         assert np.array_equal(one[name], two[name]), name
         assert np.array_equal(cpu[name], two[name]), name
