@@ -136,7 +136,10 @@ class Rank:
         owner = decomposition.owners(layer, self.cuts)
         sends = [take(self.owned, decomposition.needed_by(x, owner, self.cuts, self.box_min, self.cell_size,
                                                           self.width, r)) for r in range(self.size)]
-        held = in_id_order(self.comm.alltoall(sends))  # [2]
+        kept, sends[self.rank] = sends[self.rank], None  # (its own share stays: no message over 2 GiB on 1 rank)
+        received = self.comm.alltoall(sends)  # [2]
+        received[self.rank] = kept
+        held = in_id_order(received)
         mine = decomposition.owners(decomposition.layers_of(held["particle_x"][:, self.axis], self.box_min,
                                                             self.cell_size, self.layers), self.cuts) == self.rank
         mine_ids = held["particle_id"][mine]
@@ -202,11 +205,12 @@ class Rank:
 
     def gather(self):
         """Rank 0: load every rank's owned particles, in id order, and return sim.read() (checked); others: None.
-        (The next step loads the rank's own share again.)"""
-        parts = self.comm.gather(self.owned, root=0)
+        (The next step loads the rank's own share again.) A message a rank: a pickled gather's counts and
+        displacements are 32-bit, and its whole would pass 2 GiB at about 27 M particles (80 bytes each)."""
         if self.rank != 0:
+            self.comm.send(self.owned, dest=0)
             return None
-        self.sim.load(in_id_order(parts))
+        self.sim.load(in_id_order([self.owned] + [self.comm.recv(source=r) for r in range(1, self.size)]))
         return self.sim.read()
 
 
