@@ -95,7 +95,8 @@ def in_id_order(parts):
 
 class Rank:
     """One rank's share of a Simulation `sim` over MPI communicator `comm`: its owned particles between steps
-    (`owned`, per-particle arrays of LOADED in id order), the cuts, and the step (module docstring)."""
+    (`owned`, per-particle arrays of LOADED, in the device's order: what it holds is sorted by id at each load),
+    the cuts, and the step (module docstring)."""
 
     def __init__(self, sim, comm):
         self.sim, self.comm, self.rank, self.size = sim, comm, comm.Get_rank(), comm.Get_size()
@@ -158,7 +159,7 @@ class Rank:
             backend.run_stages(self.after_dt)
             start = self.lap("stages", start)
         after = backend.read(LOADED)  # [5]
-        self.owned = in_id_order([take(after, np.isin(after["particle_id"], mine_ids))])
+        self.owned = take(after, np.isin(after["particle_id"], mine_ids))
         self.lap("keep", start)
         self.sim.step_count += 1
 
@@ -186,9 +187,9 @@ class Rank:
         backend.write_buffer("dt_partial", partial)
 
     def write_piece(self, series, out_dir, step, t):
-        """Each rank writes its owned particles (in id order) as its piece of snapshot `step`; rank 0 (`series`,
-        the others None) lists the pieces in the run folder's manifest first and, once all are written, names
-        them in the snapshot's .pvtp, listed in the .pvd."""
+        """Each rank writes its owned particles (in the device's order) as its piece of snapshot `step`; rank 0
+        (`series`, the others None) lists the pieces in the run folder's manifest first and, once all are written,
+        names them in the snapshot's .pvtp, listed in the .pvd."""
         dim, pieces = self.sim.dim, None
         x = self.owned["particle_x"][:, :dim]
         data = {"velocity": self.owned["particle_v"][:, :dim], "density": self.owned["particle_rho"],
