@@ -31,6 +31,18 @@ from sphcore.vk_runner.context import STAGING_KEPT
 from sphcore.workgroups import group_count
 
 NAMES = list(BUFFERS)  # binding number = index
+SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow the particle count
+HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
+
+
+def sized_shapes(params, spec):
+    """The shape of each buffer whose length follows the particle count (SIZED), for `params`' count."""
+    shapes = {}
+    for name, (_, c, length) in BUFFERS.items():
+        if length in SIZED:
+            k = buffer_length(length, params, spec.MAX_NEIGHBOURS, spec.GRADIENTS)
+            shapes[name] = (k, c) if c > 1 else (k,)
+    return shapes
 
 
 def profile_name(stage):
@@ -154,8 +166,32 @@ class NumbaBackend:
         self.precision, self.real = precision, buffer_dtype("particle_x", precision).type
         self.state = {k: np.array(state[k], buffer_dtype(k, precision), copy=True) for k in BUFFERS}
         self.gauges = len(self.state["gauge_state"]) // 2
-        self._launch = [(self._launcher(s.name), self._groups(s), stage_params(params, s),
-                         [self.state[k] for k in STAGES[s.name][2]], s.when) for s in stages]
+        self.store = {}  # (load: each SIZED buffer's whole array, of which state holds the first rows)
+        self._launches()
+
+    def _launches(self):
+        self._launch = [(self._launcher(s.name), self._groups(s), stage_params(self.params, s),
+                         [self.state[k] for k in STAGES[s.name][2]], s.when) for s in self.stages]
+
+    def load(self, params, particles, kept=()):
+        """Hold another particle set, of `params`' count, in place (sphcore.stepper.Simulation.load): `particles`
+        maps buffer names to its values; the buffers in `kept` stay as they are, every other one is zeroed.
+        Each SIZED buffer is a view of the first rows of an array as long as the most particles held so far
+        (grown to HEADROOM times the count where a load exceeds it); the mirrors see arrays of the count."""
+        shapes = sized_shapes(params, self.spec)
+        for name, shape in shapes.items():
+            whole = self.store.get(name, self.state[name])
+            if len(whole) < shape[0]:
+                whole = np.zeros((int(shape[0] * HEADROOM), *shape[1:]), whole.dtype)
+            self.store[name] = whole
+            self.state[name] = whole[:shape[0]]
+        for name in BUFFERS:
+            if name in particles:
+                self.state[name][...] = particles[name]
+            elif name not in kept:
+                self.state[name][...] = 0
+        self.params = params
+        self._launches()
 
     def _launcher(self, name):
         launch = STAGES[name][0](self.spec, self.real)
@@ -190,6 +226,11 @@ class NumbaBackend:
         launch = STAGES[stage.name][0](self.spec, self.real)
         launch(self._launch_groups(self._groups(stage), stage.when), self.local_size,
                stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
+
+    def run_stages(self, stages):
+        """`stages` in order, as run_stage runs each."""
+        for stage in stages:
+            self.run_stage(stage)
 
     def step(self, count=1):
         if self.profile is not None:
@@ -276,7 +317,7 @@ class VulkanBackend:
             self.buffers[name].write(np.asarray(state[name], self.dtypes[name]))
         self.params_buffer = self.ctx.buffer(UNIFORM_BYTES, "params", uniform=True)  # (params.glsl: Params)
         self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
-        self.local_size, self.spec_values = local_size, spec.values()
+        self.local_size, self.spec, self.spec_values = local_size, spec, spec.values()
         self.pipelines = {}
         for name in sorted({s.name for s in stages}):
             self._pipeline(name)
@@ -416,6 +457,49 @@ class VulkanBackend:
         stage = stage if isinstance(stage, Stage) else Stage(stage)
         self._pipeline(stage.name)
         self._submit(self._recording(1, [stage]))
+
+    def run_stages(self, stages):
+        """`stages` in order, in one submission (recorded once, as a step is)."""
+        stages = [s if isinstance(s, Stage) else Stage(s) for s in stages]
+        for stage in stages:
+            self._pipeline(stage.name)
+        self._submit(self._recording(1, stages))
+
+    def load(self, params, particles, kept=()):
+        """Hold another particle set, of `params`' count, in place (sphcore.stepper.Simulation.load): `particles`
+        maps buffer names to its values; the buffers in `kept` stay as they are on the device, every other one is
+        zeroed there (vkCmdFillBuffer). The buffers keep their size while the set fits (the shaders stop at P.n),
+        else grow to HEADROOM times the count (the pipelines' descriptor sets are rebound to the new ones). The
+        uniform gets the new params and the recordings, whose dispatch sizes were the old count's, are freed:
+        the next steps record anew (a recording of one step's stages: a few milliseconds of Python)."""
+        shapes = sized_shapes(params, self.spec)
+        self.ctx.vk.vkDeviceWaitIdle(self.ctx.device)
+        for rec in self._recordings.values():
+            rec.free()
+            if rec.timer is not None:
+                rec.timer.free()
+        self._recordings, self._known = {}, {}
+        grown = [name for name, shape in shapes.items()
+                 if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
+        for name in grown:
+            self.buffers[name].free()
+            self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
+                                                 name)
+        if grown:
+            for name, pipeline in self.pipelines.items():
+                pipeline.bind({NAMES.index(b): self.buffers[b] for b in STAGES[name][2]}, uniform=self.params_buffer)
+        self.shapes.update(shapes)
+        self.params = params
+        self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
+        zeroed = [name for name in BUFFERS if name not in particles and name not in kept]
+        if zeroed:
+            rec = self.ctx.record()
+            for name in zeroed:
+                rec.fill(self.buffers[name])
+            self.ctx.submit(rec.end())
+            rec.free()
+        for name, values in particles.items():
+            self.write_buffer(name, values)
 
     def step(self, count=1):
         if self.windows is None:

@@ -45,7 +45,8 @@ def cmd_run(args):
         scene = Scene.load(args.scene)
         out = Path(args.out or Path("runs") / scene["name"])
         arrays = parallel.main(dict(scene=scene, steps=args.steps, out_dir=out, overwrite=args.overwrite,
-                                    local_size=args.local_size, backend=args.backend or "numba"))
+                                    local_size=args.local_size, backend=args.backend or "numba",
+                                    device=args.device))
         if arrays is not None:
             print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps on "
                   f"{parallel.launched_ranks()} ranks, t = {float(arrays['time']):.4g} s -> {out}/final.npz")

@@ -186,6 +186,40 @@ def snapshot_step(name):
     return int(m.group(1)) if m else -1
 
 
+def entry_step(name):
+    """The step of a series' entry: a snapshot NAME_NNNNNNN.vtp or a parallel one NAME_NNNNNNN.pvtp (-1 else)."""
+    name = str(name)
+    return snapshot_step(name[:-5] + ".vtp" if name.endswith(".pvtp") else name)
+
+
+def piece_name(name, step, rank):
+    """The file of rank `rank`'s piece of parallel snapshot `step` (NAME_NNNNNNN_pR.vtp)."""
+    return f"{name}_{step:07d}_p{rank}.vtp"
+
+
+def pvtp_bytes(pieces, position, point_data):
+    """A ParaView parallel PolyData file (.pvtp) naming the .vtp files `pieces`, whose arrays are those of
+    write_vtp_to(f, position, point_data) (their types and components read from these)."""
+    root = ET.Element("VTKFile", type="PPolyData", version="1.0", byte_order="LittleEndian", header_type="UInt64")
+    poly = ET.SubElement(root, "PPolyData", GhostLevel="0")
+
+    def declare(parent, name, arr):
+        arr = _vtk_array(arr, name)
+        components = 3 if arr.ndim == 2 and arr.shape[1] == 2 else (arr.shape[1] if arr.ndim == 2 else 1)
+        el = ET.SubElement(parent, "PDataArray", type=_VTK_TYPES[arr.dtype], Name=name)
+        if arr.ndim == 2:
+            el.set("NumberOfComponents", str(components))
+
+    data = ET.SubElement(poly, "PPointData")
+    for name, arr in point_data.items():
+        declare(data, name, arr)
+    declare(ET.SubElement(poly, "PPoints"), "Points", position)
+    for piece in pieces:
+        ET.SubElement(poly, "Piece", Source=piece)
+    ET.indent(root)
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True)
+
+
 def read_pvd(path):
     """[(file name, time)] of the data sets of ParaView series `path`; raises OSError, xml.etree's ParseError
     (a SyntaxError) or ValueError (a time that is no number)."""
@@ -230,7 +264,7 @@ class SnapshotSeries:
             for name, time in read_pvd(self.pvd_path):
                 if folder is not None and name not in folder.names:
                     continue  # not a snapshot of this run's
-                self._entries[name] = (snapshot_step(name), time)  # (foreign entries, step -1, sort first)
+                self._entries[name] = (entry_step(name), time)  # (foreign entries, step -1, sort first)
         self._update_files()
 
     def _update_files(self):
@@ -254,9 +288,26 @@ class SnapshotSeries:
         self._write_pvd()
         return self.out_dir / fname
 
+    def piece_names(self, step, ranks):
+        """The files of the `ranks` pieces of parallel snapshot `step` (piece_name)."""
+        return [piece_name(self.name, step, r) for r in range(ranks)]
+
+    def add_parallel(self, step: int, time: float, ranks, position, point_data) -> Path:
+        """List parallel snapshot `step`, whose `ranks` pieces (piece_names) are written, in its .pvtp, then
+        rewrite the .pvd (sphcore.parallel: each rank writes its piece, rank 0 calls this with its piece's
+        arrays, whose types every piece shares)."""
+        fname = f"{self.name}_{step:07d}.pvtp"
+        with self._open(fname) as f:
+            f.write(pvtp_bytes(self.piece_names(step, ranks), position, point_data))
+        self._entries[fname] = (int(step), float(time))
+        self._update_files()
+        self._write_pvd()
+        return self.out_dir / fname
+
     def truncate(self, step: int) -> None:
         """Drop the snapshots after `step` from the .pvd, then delete their files (only files named
-        NAME_NNNNNNN.vtp in out_dir, and with a folder only those its manifest lists): a run resumed
+        NAME_NNNNNNN.vtp, or NAME_NNNNNNN.pvtp and its pieces NAME_NNNNNNN_pR.vtp, in out_dir, and with a folder
+        only those its manifest lists): a run resumed
         from a checkpoint at `step` continues the series from there, and one resumed to fewer steps
         keeps none of the later ones."""
         later = [f for f, (s, _) in self._entries.items() if s > step]
@@ -266,12 +317,18 @@ class SnapshotSeries:
             del self._entries[f]
         self._update_files()
         self._write_pvd()
+        names = set(self.folder.names) if self.folder is not None else {f.name for f in self.out_dir.iterdir()}
         for f in later:
-            if re.fullmatch(rf"{re.escape(self.name)}_\d{{7}}\.vtp", f):
+            if not re.fullmatch(rf"{re.escape(self.name)}_\d{{7}}\.p?vtp", f):
+                continue
+            gone = [f]
+            if f.endswith(".pvtp"):  # and a parallel snapshot's pieces
+                gone += sorted(g for g in names if re.fullmatch(re.escape(f[:-5]) + r"_p\d+\.vtp", g))
+            for g in gone:
                 if self.folder is not None:
-                    self.folder.remove(f)
+                    self.folder.remove(g)
                 else:
-                    (self.out_dir / f).unlink(missing_ok=True)
+                    (self.out_dir / g).unlink(missing_ok=True)
 
     def _write_pvd(self):
         with self._open(self.pvd_path.name) as f:

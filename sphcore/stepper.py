@@ -134,7 +134,6 @@ class Simulation:
         self.density_stages = [s for s in density_stages(scene) if s.when != REUSE]  # (a build's: the scan)
         self.backend = make_backend(backend, self.params, state, self.stages, self.spec,
                                     precision=scene["physics.precision"], **backend_options)
-        self.local_size = backend_options.get("local_size", 128)  # (load's new backend)
         del state, x0
         poll()
         if hasattr(self.backend, "warm_up"):
@@ -286,33 +285,26 @@ class Simulation:
 
     @_exclusive
     def load(self, particles):
-        """Hold another set of particles from now on (numba): `particles` maps every per-particle buffer of
-        CARRIED (LOADED) to an array, rows in any order, with the particles' global ids in particle_id (ids of
+        """Hold another set of particles from now on: `particles` maps every per-particle buffer of CARRIED
+        (LOADED) to an array, rows in any order, with the particles' global ids in particle_id (ids of
         fluid_count and up are the bodies' wall particles). The other carried buffers (the time, the grid's
-        status, the iteration control) are kept, and the next step builds its neighbour lists. A rank of
-        sphcore.parallel loads its owned and halo particles before each step. The backend is made anew for
-        the new count (the mirrors' compiled code is cached: no compile); n is no closure constant. read() and
-        checkpoint() check and save the whole scene: call them with every particle loaded."""
-        if self.backend.name != "numba":
-            raise SimulationError(f"Simulation.load(): the {self.backend.name} backend cannot change its particle "
-                                  "count yet (its buffers, dispatch sizes and recorded steps are sized at the start)")
+        status, the iteration control) and the obstacles are kept, every other buffer is zeroed (as at the
+        start), and the next step builds its neighbour lists. A rank of sphcore.parallel loads its owned and halo
+        particles before each step. The backend stays (no compile, no new Vulkan device): its buffers keep their
+        size while the set fits, n in the parameter block (Vulkan: its uniform) becomes the count, and the
+        dispatch sizes follow it (backends: load). read() and checkpoint() check and save the whole scene: call
+        them with every particle loaded."""
         if self.gauges is not None:
             raise SimulationError("Simulation.load(): the scene's gauges sample by particle id across the whole "
                                   "scene; a scene with [[gauges]] cannot load another particle set yet")
         n = len(particles["particle_id"])
         params = self.scene.params(n, self.fluid_count)
-        state = empty_state(params, self.scene["physics.precision"], self.scene["domain.obstacles"],
-                            self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS, None)
-        for name in LOADED:
-            state[name][...] = particles[name]
-        for name in CARRIED:
-            if name not in LOADED:
-                state[name] = self.backend.read_buffer(name)
-        state["control"][CONTROL_REBUILD] = 1  # (the lists of the set held before are of other particles)
-        self.backend.close()
-        self.backend = make_backend("numba", params, state, self.stages, self.spec, local_size=self.local_size,
-                                    precision=self.scene["physics.precision"])
+        kept = [name for name in CARRIED if name not in LOADED] + ["obstacle_box"]
+        self.backend.load(params, {name: particles[name] for name in LOADED}, kept)
         self.params, self.n, self._carried = params, n, None
+        control = self.backend.read_buffer("control")
+        control[CONTROL_REBUILD] = 1  # (the lists of the set held before are of other particles)
+        self.backend.write_buffer("control", control)
 
     @_exclusive
     def restore(self, arrays):

@@ -210,3 +210,26 @@ def test_atomic_savez_same_bytes_at_another_time(tmp_path, monkeypatch):
     with np.load(tmp_path / "b.npz", allow_pickle=False) as z:
         assert sorted(z.files) == ["position", "step"]
         np.testing.assert_array_equal(z["position"], arrays["position"])
+
+
+def test_parallel_snapshot_pieces_read_as_one(tmp_path):
+    """A .pvtp naming two .vtp pieces (add_parallel) reads, through VTK's parallel reader, as the pieces' points
+    joined, with their arrays; listed in the .pvd; truncate deletes it and its pieces."""
+    series = SnapshotSeries(tmp_path, "demo")
+    a, b = particles(5, seed=1), particles(7, seed=2)
+    for name, (pos, data) in zip(series.piece_names(10, 2), (a, b)):
+        write_vtp(tmp_path / name, pos, data)
+    series.add_parallel(10, 0.5, 2, *a)
+    reader = vtk.vtkXMLPPolyDataReader()
+    reader.SetFileName(str(tmp_path / "demo_0000010.pvtp"))
+    reader.Update()
+    assert reader.GetErrorCode() == 0
+    poly = reader.GetOutput()
+    points = vtk_to_numpy(poly.GetPoints().GetData())
+    assert np.array_equal(points[:, :2], np.concatenate([a[0], b[0]])) and (points[:, 2] == 0).all()
+    density = vtk_to_numpy(poly.GetPointData().GetArray("density"))
+    assert np.array_equal(density, np.concatenate([a[1]["density"], b[1]["density"]]))
+    assert output.read_pvd(tmp_path / "demo.pvd") == [("demo_0000010.pvtp", 0.5)]
+    assert SnapshotSeries(tmp_path, "demo").files == [tmp_path / "demo_0000010.pvtp"]
+    series.truncate(5)
+    assert sorted(os.listdir(tmp_path)) == ["demo.pvd"]

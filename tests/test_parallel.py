@@ -2,6 +2,7 @@
 force; Simulation.load; and a 2D dam break under mpiexec on 2 ranks, bitwise against the same driver on 1 rank
 (sphcore.parallel, docs/parallel.md)."""
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -12,7 +13,7 @@ import pytest
 
 import sphcore
 from sphcore import decomposition
-from sphcore.errors import SceneError, SimulationError
+from sphcore.errors import SceneError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -119,21 +120,61 @@ def test_launched_ranks_reads_the_launcher(monkeypatch):
 
 def test_what_is_not_decomposed_is_refused():
     from sphcore import parallel
-    scene = sphcore.Scene.from_dict(small_dam_break())
-    with pytest.raises(SceneError, match="backend: a run on several ranks does not handle the vulkan backend"):
-        parallel.check(scene, "vulkan")
     dfsph = sphcore.Scene.from_dict({**small_dam_break(), "physics": {"model": "dfsph"}})
     with pytest.raises(SceneError, match="physics.pressure_solver: .* DFSPH"):
         parallel.check(dfsph, "numba")
 
 
+def column(height):
+    """small_dam_break with a column `height` m tall (the same grid, spacing and mass)."""
+    config = small_dam_break()
+    config["fluid"] = {**config["fluid"], "blocks": [{"min": [0.0, 0.0], "max": [0.25, height]}]}
+    return sphcore.Scene.from_dict(config)
+
+
 @pytest.mark.vulkan
-def test_load_is_refused_on_vulkan():
-    pytest.importorskip("vulkan")
-    scene = sphcore.Scene.from_dict({"fluid": {"spacing": 0.05}})
-    with sphcore.Simulation(scene, backend="vulkan") as sim:
-        with pytest.raises(SimulationError, match="vulkan backend cannot change its particle count"):
-            sim.load({})
+def test_load_on_vulkan_in_place_and_grown_steps_as_numba():
+    """Simulation.load on Vulkan keeps its backend (no new device) and steps the loaded set as numba steps it:
+    a subset (buffers kept at their size, the count and dispatch sizes the subset's), then a set larger than
+    the buffers (grown, pipelines rebound), each 5 steps, bitwise equal to numba's; ids and count kept."""
+    from conftest import vulkan_or_skip
+    from sphcore.stepper import LOADED
+    vulkan_or_skip()
+    with sphcore.Simulation(column(0.5)) as full:
+        larger = full.backend.read(LOADED)  # 300 particles
+    small = column(0.3)  # 180 particles
+    with sphcore.Simulation(small, backend="vulkan") as gpu, sphcore.Simulation(small) as cpu:
+        backend, x_buffer = gpu.backend, gpu.backend.buffers["particle_x"]
+        held = cpu.backend.read(LOADED)
+        subset = {name: values[held["particle_id"] % 3 != 0] for name, values in held.items()}  # 120
+        for particles, grown in ((subset, False), (larger, True)):
+            for sim in (gpu, cpu):
+                sim.load(particles)
+                sim.step(5)
+            assert gpu.backend is backend and (gpu.backend.buffers["particle_x"] is not x_buffer) == grown
+            a, b = gpu.backend.read(LOADED), cpu.backend.read(LOADED)
+            assert len(a["particle_id"]) == gpu.n == len(particles["particle_id"])
+            assert sorted(a["particle_id"].tolist()) == sorted(particles["particle_id"].tolist())
+            for name in LOADED:
+                assert np.array_equal(a[name], b[name]), name
+            assert np.isfinite(a["particle_x"]).all()
+        assert gpu.time == cpu.time > 0
+
+
+def test_load_on_numba_reuses_its_arrays():
+    """numba's load keeps one array per buffer while the sets fit (views of its first rows), grows past it."""
+    from sphcore.stepper import LOADED
+    with sphcore.Simulation(column(0.5)) as full:
+        larger = full.backend.read(LOADED)
+    with sphcore.Simulation(column(0.3)) as sim:
+        held = sim.backend.read(LOADED)
+        sim.load({name: values[:100] for name, values in held.items()})
+        first = sim.backend.store["particle_x"]
+        assert len(first) == 180 and sim.backend.state["particle_x"].base is first
+        sim.load(larger)
+        assert len(sim.backend.store["particle_x"]) >= 300 and sim.backend.store["particle_x"] is not first
+        sim.step(2)
+        assert len(sim.backend.read_buffer("particle_x")) == 300
 
 
 def mpiexec():
@@ -149,7 +190,7 @@ def mpiexec():
 ONE_RANK = """
 import sys, sphcore
 from sphcore import parallel
-parallel.run(sphcore.Scene.load(sys.argv[1]), out_dir=sys.argv[2], progress=False)
+parallel.run(sphcore.Scene.load(sys.argv[1]), out_dir=sys.argv[2], progress=False, backend=(sys.argv[3:] or ["numba"])[0])
 """
 
 
@@ -168,6 +209,17 @@ def toml(config):
         if table != "name":
             lines += [f"[{table}]"] + [f"{k} = {value(v)}" for k, v in keys.items()]
     return "\n".join(lines) + "\n"
+
+
+def read_points(path):
+    """The points of a .pvtp (its pieces joined) or a .vtp, read by VTK's own readers."""
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+    reader = vtk.vtkXMLPPolyDataReader() if str(path).endswith(".pvtp") else vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    assert reader.GetErrorCode() == 0
+    return vtk_to_numpy(reader.GetOutput().GetPoints().GetData())
 
 
 def small_dam_break_3d():
@@ -200,7 +252,18 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     one, two = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "two" / "final.npz")
     for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
         assert np.array_equal(one[name], two[name]), name
-    assert sorted(os.listdir(tmp_path / "two")) == sorted(os.listdir(tmp_path / "one"))
+    # the snapshots: a .pvtp each, its pieces (a rank's each) holding every particle once, as the 1-rank piece
+    pieces = re.compile(r".*_p\d+\.vtp")
+    assert [f for f in sorted(os.listdir(tmp_path / "two")) if not pieces.fullmatch(f)] == \
+        [f for f in sorted(os.listdir(tmp_path / "one")) if not pieces.fullmatch(f)]
+    pvtp = sorted((tmp_path / "two").glob("*.pvtp"))
+    assert [p.name for p in pvtp] == [f"{config['name']}_{k:07d}.pvtp" for k in sorted({*range(0, steps, 100), steps})]
+    for snapshot in pvtp:
+        assert len(re.findall(r'Source="[^"]*_p\d\.vtp"', snapshot.read_text())) == 2
+        two_x = read_points(snapshot)
+        one_x = read_points(tmp_path / "one" / snapshot.name)
+        assert len(two_x) == n and np.array_equal(np.unique(two_x, axis=0), np.unique(one_x, axis=0))
+        assert len(np.unique(two_x, axis=0)) == n  # (no particle twice)
     # migration: particles owned by another rank at the end than at the start (the column fell across a cut)
     P, axis = scene.params(n)[0], scene.dim - 1
     layers = int(P["grid_dim"][axis])
@@ -217,6 +280,38 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     assert int(two["step"]) == steps + 20
     for name in ("position", "velocity", "density", "pressure", "time"):
         assert np.array_equal(one[name], two[name]), name
+
+
+def two_ranks(scene_file, out, env, *options):
+    """`mpiexec -n 2 sphcore run scene_file --out out options`: the completed process."""
+    return subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                           "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-m", "sphcore", "run",
+                           str(scene_file), "--out", str(out), *options], env=env, capture_output=True, text=True,
+                          timeout=900)
+
+
+@pytest.mark.vulkan
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+@pytest.mark.parametrize("config", [small_dam_break(), small_dam_break_3d()], ids=["2d", "3d"])
+def test_dam_break_on_two_ranks_on_lavapipe(tmp_path, config):
+    """The 2D and 3D dam breaks on 2 ranks on Vulkan (both on lavapipe here): bitwise the 1-rank driver on Vulkan,
+    and bitwise the 2-rank run on numba."""
+    from conftest import vulkan_or_skip
+    vulkan_or_skip()
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(config))
+    steps = config["time"]["steps"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    subprocess.run([sys.executable, "-c", ONE_RANK, str(scene_file), str(tmp_path / "one"), "vulkan"], env=env,
+                   check=True, timeout=900)
+    for backend in ("vulkan", "numba"):
+        run = two_ranks(scene_file, tmp_path / backend, env, "--backend", backend)
+        assert run.returncode == 0, run.stderr[-2000:]
+    one, two, cpu = (np.load(tmp_path / run / "final.npz") for run in ("one", "vulkan", "numba"))
+    assert int(two["step"]) == steps
+    for name in ("position", "velocity", "density", "pressure", "time", "dt"):
+        assert np.array_equal(one[name], two[name]), name
+        assert np.array_equal(cpu[name], two[name]), name
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")

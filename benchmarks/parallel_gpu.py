@@ -1,0 +1,99 @@
+"""The decomposed 3D dam break (sphcore.parallel) on N ranks, one GPU each: ms per step and what the exchange,
+staged through host memory, takes of it. Run under mpiexec (benchmarks/parallel_gpu.sh runs the cases):
+
+    mpiexec -n 2 python benchmarks/parallel_gpu.py --count 8388608 --out benchmarks/results/parallel_gpu.json
+    mpiexec -n 2 python benchmarks/parallel_gpu.py --count 2097152 --per-rank ...   # weak scaling: 2 M a rank
+
+The scene is steps_per_second.py's 3D dam break (Tait, h = 2 dx, fixed dt, a sort every step; its block's
+lattice: the count rounded up to a cube), cut in slabs along z. Rank r runs on its host's r-th GPU
+(parallel.rank_device; --device overrides). After --warmup steps (shader builds, first recordings), --steps steps
+are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the particles
+picked, the pickled alltoall, the sort by id), load (host -> device: Simulation.load), stages (the plan on the
+device), dt (the dt's Allreduce; none at a fixed dt) and keep (device -> host: the owned particles read back).
+The step's time is the slowest rank's (they wait for each other in the alltoall). With --plain, rank 0 of a 1-rank
+run then times a plain Simulation of the same scene (its particles resident on the GPU: the baseline the
+decomposed runs are measured against). Appends one JSON line to --out (and prints it).
+"""
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+from mpi4py import MPI
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import sphcore  # noqa: E402
+from sphcore import parallel  # noqa: E402
+from steps_per_second import make_case  # noqa: E402
+
+PARTS = ("exchange", "load", "stages", "dt", "keep")
+HOST = ("exchange", "load", "keep")  # the parts that move particles through host memory
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--count", type=int, default=1_000_000, help="particles in all, or a rank's with --per-rank")
+    ap.add_argument("--per-rank", action="store_true", help="weak scaling: --count particles a rank")
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--warmup", type=int, default=3)
+    ap.add_argument("--backend", default="vulkan", choices=("vulkan", "numba"))
+    ap.add_argument("--device", help="Vulkan device of every rank (default: the rank's own, rank_device)")
+    ap.add_argument("--plain", action="store_true", help="1 rank: also time a plain Simulation of the scene")
+    ap.add_argument("--out", type=Path)
+    args = ap.parse_args()
+    comm = MPI.COMM_WORLD
+    size, rank_number = comm.Get_size(), comm.Get_rank()
+    count = args.count * size if args.per_rank else args.count
+    scene, _ = make_case(count, dim=3, search="grid")
+    options = {}
+    if args.backend == "vulkan":
+        options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
+    start = time.perf_counter()
+    with sphcore.Simulation(scene, args.backend, **options) as sim:
+        rank = parallel.Rank(sim, comm)
+        for _ in range(args.warmup):
+            rank.step()
+        setup = time.perf_counter() - start
+        rank.seconds = dict.fromkeys(PARTS, 0.0)
+        held = 0
+        comm.Barrier()
+        start = time.perf_counter()
+        for _ in range(args.steps):
+            rank.step()
+            held += sim.n
+        comm.Barrier()
+        seconds = time.perf_counter() - start
+        row = {"rank": rank_number, "device": sim.device_name, "owned": len(rank.owned["particle_id"]),
+               "held_mean": held / args.steps, **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
+        n = sim.fluid_count
+    rows = comm.gather(row, root=0)
+    if rank_number != 0:
+        return
+    ms = 1e3 * seconds / args.steps
+    slowest = {p: max(r[f"{p}_ms"] for r in rows) for p in PARTS}
+    result = {"ranks": size, "scaling": "weak" if args.per_rank else "strong", "particles": n,
+              "particles_per_rank": n / size, "backend": args.backend, "steps": args.steps, "ms_per_step": ms,
+              "host_staged_ms": sum(slowest[p] for p in HOST), "host_staged_share": sum(slowest[p] for p in HOST) / ms,
+              **{f"{p}_ms_slowest": slowest[p] for p in PARTS}, "setup_seconds": setup, "per_rank": rows,
+              "machine": platform.node(), "mpi": MPI.Get_library_version().split(",")[0].strip()}
+    if args.plain and size == 1:
+        with sphcore.Simulation(scene, args.backend, **options) as sim:
+            sim.step(args.warmup)
+            sim.read()
+            start = time.perf_counter()
+            sim.step(args.steps)
+            sim.read()  # (a sync; a read of every particle, once)
+            result["plain_ms_per_step"] = 1e3 * (time.perf_counter() - start) / args.steps
+    line = json.dumps(result)
+    print(line, flush=True)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        with open(args.out, "a") as f:
+            f.write(line + "\n")
+
+
+if __name__ == "__main__":
+    main()

