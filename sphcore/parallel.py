@@ -34,6 +34,7 @@ from sphcore.errors import SceneError, SimulationError
 from sphcore.output import SnapshotSeries, write_vtp
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.stepper import LOADED, Simulation
+from sphcore.vk_runner import Context
 
 # Launchers' environment variables with the world's size (Open MPI; MPICH's Hydra and Intel MPI, srun with PMI).
 # Not SLURM_NTASKS: a job's every process sees it, one started without srun too.
@@ -73,9 +74,8 @@ def check(scene, backend):
 def rank_device(local_rank):
     """The Vulkan device (its index) of the rank `local_rank` of a host: the local_rank-th, modulo their number,
     of the devices of the type Vulkan's default is (the GPUs where there are; else lavapipe)."""
-    import vulkan as vk
+    import vulkan as vk  # (only where Vulkan is used: sphcore.vk_runner imports it so too)
 
-    from sphcore.vk_runner import Context
     with Context() as ctx:
         alike = [k for k, d in enumerate(vk.vkEnumeratePhysicalDevices(ctx.instance))
                  if ctx._type_name(vk.vkGetPhysicalDeviceProperties(d).deviceType) == ctx.device_type]
