@@ -51,6 +51,15 @@ uint near_obstacles(real3 x, uint mirrored, inout real3 wall, out real3 inward) 
     return mirrored;
 }
 
+// The planes i's images are mirrored across (compute_density, walk.glsl): the walls within h of xi (cells.glsl:
+// near_walls; reused lists, LIST_SKIN: within list_reach of x_built, where i was at the list's build), then the
+// obstacles' faces where nearer (near_obstacles). Returns the bits of `mirrored`; `wall` and `inward` as there.
+// Needs cells.glsl included before this file.
+uint mirror_planes(real3 x_built, real3 xi, out real3 wall, out real3 inward) {
+    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
+    return near_obstacles(xi, mirrored, wall, inward);
+}
+
 // Whether an image at y lies in the solid: on or beyond a wall, or in or on an obstacle.
 bool solid(real3 y) {
     if (y.x <= P.box_min.x || y.x >= P.box_max.x || y.y <= P.box_min.y || y.y >= P.box_max.y

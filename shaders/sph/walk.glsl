@@ -14,7 +14,8 @@
 // compute_density scans with its own loop, the walk's scan written out: it keeps i itself, writes the lists (list
 // first, by chunks, out to list_reach at a reused list's build) and sums in the scan's order. The same scan through
 // walk.glsl's hooks, its sums and list in private globals, cost that stage 6 % on an H200 (0.409 to 0.434 ms a step
-// at 1 M particles, benchmarks/gpu_step_ab.sh; writing its chunk by selects instead: 0.460), so it stays written out.
+// at 1 M particles, benchmarks/gpu_step_ab.sh; writing its chunk by selects instead: 0.460), so it stays written out,
+// its cell ranges too (through cell_ranges.glsl the whole step ran 0.8 % slower). It shares mirror_planes.
 // The including shader defines the hook it calls before this file:
 //     void pair(uint i, uint j, uint image, real3 r, real r2, real3 inward)
 //     void list_entry(uint i, uint slot, inout uvec4 chunk)
@@ -34,15 +35,14 @@ void list_entry(uint i, uint slot, inout uvec4 chunk);
 
 // Hands every other particle and image within h of i (at xi) to `pair`, in the list's or the scan's order.
 void walk_neighbours(uint i, real3 xi) {
-    // the wall and obstacle images, as in compute_density (cells.glsl: near_walls, obstacles.glsl: near_obstacles):
+    // the wall and obstacle images, as in compute_density (obstacles.glsl: mirror_planes):
     // bit a of `mirrored` says that the wall on axis a, or an obstacle's face where nearer, is within h; `inward`
     // points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN): the walls and cells of where i
     // was at the list's build (scratch_x)
     real3 x_built = LIST_SKIN > 0u ? scratch_x[i].xyz : xi;
     real3 wall;
-    uint mirrored = LIST_SKIN > 0u ? near_walls_within(x_built, list_reach(), wall) : near_walls(xi, wall);
     real3 inward;
-    mirrored = near_obstacles(xi, mirrored, wall, inward);
+    uint mirrored = mirror_planes(x_built, xi, wall, inward);
     // i's list where it fits its slots, else the scan (below: the list's loop after the scan's, an order in
     // which the GPU's compiler keeps the two loops apart: with reused lists, where both end alike, the other
     // order cost compute_forces 8 % on an H200, issue 31)

@@ -16,7 +16,6 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.cell_ranges import cell_ranges
 from sphcore.sph.cells import cells, skin
 from sphcore.sph.density_diffusion import density_diffusion
 from sphcore.sph.dfsph import CONTROL_BUILDS, IMAGE_SHIFT, list_slots, store_chunk, with_lane
@@ -46,17 +45,15 @@ def can_list_first(spec):
 
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
-    NEIGHBOUR_STATS = spec.NEIGHBOUR_STATS
+    GRID, NEIGHBOUR_STATS = spec.GRID, spec.NEIGHBOUR_STATS
     cell_of = cells(spec, real).cell_of
-    near_walls = cells(spec, real).near_walls
     reflected = cells(spec, real).reflected
     range_count = cells(spec, real).range_count
-    cell_range = cell_ranges(spec, real)
-    near_walls_within = skin(spec, real).near_walls_within
+    range_cells = cells(spec, real).range_cells
     list_reach = skin(spec, real).list_reach
     listed_distance = neighbour_list(spec, real).listed_distance
     LIST_SKIN = spec.LIST_SKIN
-    near_obstacles = obstacles(spec, real).near_obstacles
+    mirror_planes = obstacles(spec, real).mirror_planes
     solid = obstacles(spec, real).solid
     OBSTACLES = spec.OBSTACLES
     CONTINUITY, DENSITY_DIFFUSION, BODIES = spec.CONTINUITY, spec.DENSITY_DIFFUSION, spec.BODIES
@@ -151,12 +148,8 @@ def compute_density(spec, real=np.float32):
         x_built_x = scratch_x[i, 0] if walk else xi_x
         x_built_y = scratch_x[i, 1] if walk else xi_y
         x_built_z = scratch_x[i, 2] if walk else xi_z
-        if LIST_SKIN > 0:
-            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
-        else:
-            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
-        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
-            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = mirror_planes(
+            P, obstacle_box, x_built_x, x_built_y, x_built_z, xi_x, xi_y, xi_z)
         # [4] sum kernel_w over every particle and image within h, self included (with
         #     NEIGHBOUR_STATS, also count them and sum a hash of each (id, image): the set's fingerprint). Image
         #     `image` mirrors the axes of its bits; the image of j is within h of xi exactly when j
@@ -198,11 +191,17 @@ def compute_density(spec, real=np.float32):
                 continue
             xm_x, xm_y, xm_z = reflected(x_built_x, x_built_y, x_built_z, wall_x, wall_y, wall_z, image)
             base_x, base_y, base_z = cell_of(P, xm_x, xm_y, xm_z)
-            # [6] the 3^dim cells around xm, as ranges of sorted particles (cell_ranges.glsl)
+            # [6] the 3^dim cells around xm, as ranges of sorted particles (cells.glsl: range_cells; written out, as
+            #     in the .comp, which says why)
             for k in range(range_count()):
-                inside, start, end = cell_range(P, cell_pyramid, cell_start, base_x, base_y, base_z, k)
-                if not inside:
-                    continue
+                start = 0
+                end = int(P.n)
+                if GRID:
+                    inside, first, last = range_cells(P, base_x, base_y, base_z, k)
+                    if not inside:
+                        continue
+                    start = int(cell_start[first])
+                    end = int(cell_start[last]) + int(cell_pyramid[last])
                 if listing and count + (end - start) > MAX_NEIGHBOURS:  # the list may fill: summed now, and the
                     count, sum_w = listed_sum(P, particle_x, neighbours, i, xi_x, xi_y, xi_z, wall_x, wall_y,
                                               wall_z, count, sum_w)  # rest scanned with the branch

@@ -9,11 +9,15 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 from sphcore.sph import named
+from sphcore.sph.cells import cells, skin
 
 
 @lru_cache(maxsize=None)
 def obstacles(spec, real=np.float32):
-    DIM, OBSTACLES = spec.DIM, spec.OBSTACLES
+    DIM, OBSTACLES, LIST_SKIN = spec.DIM, spec.OBSTACLES, spec.LIST_SKIN
+    near_walls = cells(spec, real).near_walls
+    near_walls_within = skin(spec, real).near_walls_within
+    list_reach = skin(spec, real).list_reach
 
     @njit
     def near_obstacles(P, obstacle_box, x_x, x_y, x_z, mirrored, wall_x, wall_y, wall_z):
@@ -51,6 +55,17 @@ def obstacles(spec, real=np.float32):
         return mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z
 
     @njit
+    def mirror_planes(P, obstacle_box, x_built_x, x_built_y, x_built_z, xi_x, xi_y, xi_z):
+        """(mirrored, wall, inward) of the planes i's images are mirrored across: the walls within h of xi (reused
+        lists: within list_reach of x_built, where i was at the list's build), then the obstacles' faces where
+        nearer (near_obstacles)."""
+        if LIST_SKIN > 0:
+            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
+        else:
+            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
+        return near_obstacles(P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+
+    @njit
     def solid(P, obstacle_box, y_x, y_y, y_z):
         """Whether an image at y lies in the solid: on or beyond a wall, or in or on an obstacle."""
         if (y_x <= P.box_min[0] or y_x >= P.box_max[0] or y_y <= P.box_min[1] or y_y >= P.box_max[1]
@@ -66,4 +81,4 @@ def obstacles(spec, real=np.float32):
                 return True
         return False
 
-    return named(near_obstacles, solid)
+    return named(near_obstacles, mirror_planes, solid)

@@ -17,7 +17,7 @@ from functools import lru_cache
 from numba import njit
 
 from sphcore.sph.cell_ranges import cell_ranges
-from sphcore.sph.cells import cells, skin
+from sphcore.sph.cells import cells
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 
@@ -30,29 +30,22 @@ def walk(spec, real, pair):
     range_count = cells(spec, real).range_count
     cell_range = cell_ranges(spec, real)
     solid = obstacles(spec, real).solid
-    near_obstacles = obstacles(spec, real).near_obstacles
-    near_walls = cells(spec, real).near_walls
-    near_walls_within = skin(spec, real).near_walls_within
-    list_reach = skin(spec, real).list_reach
+    mirror_planes = obstacles(spec, real).mirror_planes
     listed_distance = neighbour_list(spec, real).listed_distance
 
     @njit(inline="always")  # (numba inlines it into its caller: no tuple crosses a call)
     def walk_neighbours(P, particle_x, scratch_x, cell_pyramid, cell_start, obstacle_box, neighbours, neighbour_count, i,
                         xi_x, xi_y, xi_z, own, state):
         """Hands every other particle and image within h of i (at xi) to `pair`; returns the sums `state`."""
-        # the wall and obstacle images, as in compute_density (cells.glsl: near_walls, obstacles.glsl: near_obstacles):
+        # the wall and obstacle images, as in compute_density (obstacles.glsl: mirror_planes):
         # bit a of `mirrored` says that the wall on axis a, or an obstacle's face where nearer, is within h; `inward`
         # points from each axis's mirror plane into the fluid. Reused lists (LIST_SKIN): the walls and cells of where
         # i was at the list's build (scratch_x)
         x_built_x = scratch_x[i, 0] if LIST_SKIN > 0 else xi_x
         x_built_y = scratch_x[i, 1] if LIST_SKIN > 0 else xi_y
         x_built_z = scratch_x[i, 2] if LIST_SKIN > 0 else xi_z
-        if LIST_SKIN > 0:
-            mirrored, wall_x, wall_y, wall_z = near_walls_within(P, x_built_x, x_built_y, x_built_z, list_reach(P))
-        else:
-            mirrored, wall_x, wall_y, wall_z = near_walls(P, xi_x, xi_y, xi_z)
-        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = near_obstacles(
-            P, obstacle_box, xi_x, xi_y, xi_z, mirrored, wall_x, wall_y, wall_z)
+        mirrored, wall_x, wall_y, wall_z, inward_x, inward_y, inward_z = mirror_planes(
+            P, obstacle_box, x_built_x, x_built_y, x_built_z, xi_x, xi_y, xi_z)
         # i's list where it fits its slots, else the scan (below: the list's loop after the scan's, as in
         # walk.glsl, where that order is the GPU's faster one)
         listed = MAX_NEIGHBOURS > 0 and int(neighbour_count[i]) <= MAX_NEIGHBOURS
