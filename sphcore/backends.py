@@ -83,12 +83,12 @@ def check_neighbours(state, spec):
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 
-def dispatch_size(stage, params, gauges=1):
-    """Invocations of `stage`: one per particle, cell, or node of the pyramid level it builds (or one, or one per
-    gauge of the `gauges`)."""
+def dispatch_size(stage, params, gauges=1, rows=None):
+    """Invocations of `stage`: one per particle (or per row of buffers with room for `rows`: the shaders stop
+    at P.n), cell, or node of the pyramid level it builds (or one, or one per gauge of the `gauges`)."""
     kind = STAGES[stage.name][1]
     if kind == "particles":
-        return int(params[0]["n"])
+        return int(params[0]["n"]) if rows is None else rows
     if kind == "one":
         return 1
     if kind == "gauges":
@@ -173,25 +173,50 @@ class NumbaBackend:
         self._launch = [(self._launcher(s.name), self._groups(s), stage_params(self.params, s),
                          [self.state[k] for k in STAGES[s.name][2]], s.when) for s in self.stages]
 
-    def load(self, params, particles, kept=()):
-        """Hold another particle set, of `params`' count, in place (sphcore.stepper.Simulation.load): `particles`
-        maps buffer names to its values; the buffers in `kept` stay as they are, every other one is zeroed.
-        Each SIZED buffer is a view of the first rows of an array as long as the most particles held so far
-        (grown to HEADROOM times the count where a load exceeds it); the mirrors see arrays of the count."""
-        shapes = sized_shapes(params, self.spec)
-        for name, shape in shapes.items():
+    def resize(self, params):
+        """Hold `params`' count of particles in place: each SIZED buffer is a view of the first rows of an array
+        as long as the most particles held so far (grown to HEADROOM times the count where the count exceeds
+        it, its rows copied); the rows up to the old count keep their values. The mirrors see arrays of the count."""
+        for name, shape in sized_shapes(params, self.spec).items():
             whole = self.store.get(name, self.state[name])
             if len(whole) < shape[0]:
-                whole = np.zeros((int(shape[0] * HEADROOM), *shape[1:]), whole.dtype)
+                grown = np.zeros((int(shape[0] * HEADROOM), *shape[1:]), whole.dtype)
+                grown[:len(self.state[name])] = self.state[name]
+                whole = grown
             self.store[name] = whole
             self.state[name] = whole[:shape[0]]
+        self.params = params
+        self._launches()
+
+    def load(self, params, particles, kept=()):
+        """Hold another particle set, of `params`' count, in place (sphcore.stepper.Simulation.load; resize):
+        `particles` maps buffer names to its values; the buffers in `kept` stay as they are, every other one is
+        zeroed."""
+        self.resize(params)
         for name in BUFFERS:
             if name in particles:
                 self.state[name][...] = particles[name]
             elif name not in kept:
                 self.state[name][...] = 0
-        self.params = params
-        self._launches()
+
+    def read_rows(self, name, start, stop):
+        """Rows start .. stop - 1 of a buffer (a copy)."""
+        return self.state[name][start:stop].copy()
+
+    def write_rows(self, name, start, values):
+        """Set a buffer's rows from `start` on to `values`."""
+        self.state[name][start:start + len(values)] = values
+
+    def read_entries(self, name, indices):
+        """The entries `indices` of a one-component buffer."""
+        return self.state[name][np.asarray(indices, np.int64)].copy()
+
+    def move_rows(self, source, destination, count):
+        """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. (the two
+        runs must not overlap)."""
+        for name in sized_shapes(self.params, self.spec):
+            if BUFFERS[name][2] == "particles":
+                self.state[name][destination:destination + count] = self.state[name][source:source + count]
 
     def _launcher(self, name):
         launch = STAGES[name][0](self.spec, self.real)
@@ -374,7 +399,7 @@ class VulkanBackend:
                                           4 * indirect_offset(stage), predicate=running)
                 else:
                     rec.dispatch(self.pipelines[stage.name], stage_dispatch(stage),
-                                 dispatch_size(stage, self.params, self.gauges),
+                                 dispatch_size(stage, self.params, self.gauges, self.rows),
                                  predicate=running if block == ALWAYS else None)
                 # a barrier for the commands too where the next stage (of the step, or of the next step) reads
                 # control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
@@ -465,32 +490,50 @@ class VulkanBackend:
             self._pipeline(stage.name)
         self._submit(self._recording(1, stages))
 
-    def load(self, params, particles, kept=()):
-        """Hold another particle set, of `params`' count, in place (sphcore.stepper.Simulation.load): `particles`
-        maps buffer names to its values; the buffers in `kept` stay as they are on the device, every other one is
-        zeroed there (vkCmdFillBuffer). The buffers keep their size while the set fits (the shaders stop at P.n),
-        else grow to HEADROOM times the count (the pipelines' descriptor sets are rebound to the new ones). The
-        uniform gets the new params and the recordings, whose dispatch sizes were the old count's, are freed:
-        the next steps record anew (a recording of one step's stages: a few milliseconds of Python)."""
+    def resize(self, params):
+        """Hold `params`' count of particles in place: the buffers keep their size while the count fits (the
+        shaders stop at P.n), else grow to HEADROOM times the count, their contents copied (the pipelines'
+        descriptor sets are rebound to the new ones). The uniform gets the new params. The recordings dispatch
+        the buffers' capacity (`rows`), so only a growth frees them (the next steps record anew: a recording of
+        one step's stages is a few milliseconds of Python)."""
         shapes = sized_shapes(params, self.spec)
         self.ctx.vk.vkDeviceWaitIdle(self.ctx.device)
+        grown = [name for name, shape in shapes.items()
+                 if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
+        for name in grown:
+            old = self.buffers[name]
+            self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
+                                                 name)
+            kept = int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize
+            if kept:
+                self.ctx._copy(old.buffer, self.buffers[name].buffer, [(0, 0, kept)])
+            old.free()
+        if grown:
+            for name, pipeline in self.pipelines.items():
+                pipeline.bind({NAMES.index(b): self.buffers[b] for b in STAGES[name][2]}, uniform=self.params_buffer)
+            self._free_recordings()
+        self.shapes.update(shapes)
+        self.params = params
+        self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
+        self._known = {}
+
+    @property
+    def rows(self):
+        """The particles the buffers hold room for: the count the recordings dispatch."""
+        return max(int(self.params[0]["n"]), self.buffers["particle_id"].nbytes // 4)
+
+    def _free_recordings(self):
         for rec in self._recordings.values():
             rec.free()
             if rec.timer is not None:
                 rec.timer.free()
         self._recordings, self._known = {}, {}
-        grown = [name for name, shape in shapes.items()
-                 if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
-        for name in grown:
-            self.buffers[name].free()
-            self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
-                                                 name)
-        if grown:
-            for name, pipeline in self.pipelines.items():
-                pipeline.bind({NAMES.index(b): self.buffers[b] for b in STAGES[name][2]}, uniform=self.params_buffer)
-        self.shapes.update(shapes)
-        self.params = params
-        self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
+
+    def load(self, params, particles, kept=()):
+        """Hold another particle set, of `params`' count, in place (sphcore.stepper.Simulation.load; resize):
+        `particles` maps buffer names to its values; the buffers in `kept` stay as they are on the device, every
+        other one is zeroed there (vkCmdFillBuffer)."""
+        self.resize(params)
         zeroed = [name for name in BUFFERS if name not in particles and name not in kept]
         if zeroed:
             rec = self.ctx.record()
@@ -500,6 +543,34 @@ class VulkanBackend:
             rec.free()
         for name, values in particles.items():
             self.write_buffer(name, values)
+
+    def _row_bytes(self, name):
+        return int(np.prod(self.shapes[name][1:])) * self.dtypes[name].itemsize
+
+    def read_rows(self, name, start, stop):
+        """Rows start .. stop - 1 of a buffer, read back from the device."""
+        shape = (max(stop - start, 0), *self.shapes[name][1:])
+        return self.buffers[name].read(self.dtypes[name], shape, start * self._row_bytes(name))
+
+    def write_rows(self, name, start, values):
+        """Set a buffer's rows from `start` on to `values`, on the device."""
+        array = np.asarray(values, self.dtypes[name]).reshape(-1, *self.shapes[name][1:])
+        self.buffers[name].write(array, start * self._row_bytes(name))
+        self._known.pop(name, None)
+
+    def read_entries(self, name, indices):
+        """The entries `indices` of a one-component buffer, in one copy from the device."""
+        size = self.dtypes[name].itemsize
+        return self.buffers[name].gather(self.dtypes[name], [(int(k) * size, size) for k in indices])
+
+    def move_rows(self, source, destination, count):
+        """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. on the
+        device (the two runs must not overlap)."""
+        for name in sized_shapes(self.params, self.spec):
+            if BUFFERS[name][2] == "particles" and count > 0:
+                size = self._row_bytes(name)
+                self.buffers[name].copy_within([(source * size, destination * size, count * size)])
+        self._known = {}
 
     def step(self, count=1):
         if self.windows is None:

@@ -15,6 +15,8 @@ a build lists pairs within (1 + s) h: `halo_width` is 2 (1 + s) h, twice the sea
 Wall images need nothing more: a particle's image across a wall is farther from an owned particle than the
 particle itself. The bodies' wall particles (Adami's wall_pressure, a third level) are not handled yet.
 """
+import math
+
 import numpy as np
 
 DEPTH = 2  # neighbour levels one step reads: forces of owned particles <- densities of neighbours <- positions
@@ -34,17 +36,30 @@ def halo_width(scene):
     return DEPTH * scene.reach * MARGIN
 
 
-def layers_of(coordinate, box_min, cell_size, layers):
-    """The cell layer (0 .. layers-1) of each particle's coordinate along the slab axis (cells.glsl: cell_of's
-    floor((x - box_min) inv_cell), here in float64; clamped into the grid)."""
-    layer = np.floor((np.asarray(coordinate, np.float64) - box_min) / cell_size)
+def layers_of(coordinate, box_min, inv_cell, layers):
+    """The cell layer (0 .. layers-1) of each particle's coordinate along the slab axis, as the grid finds it
+    (cells.glsl, cell_of: floor((x - box_min) inv_cell) in the coordinate's precision, box_min and inv_cell the
+    parameter block's float32): so a rank owns the particles its device's sort puts in its slab's cells.
+    Clamped into the grid."""
+    x = np.asarray(coordinate)
+    real = x.dtype.type if x.dtype in (np.float32, np.float64) else np.float64
+    layer = np.floor((x.astype(real) - real(np.float32(box_min))) * real(np.float32(inv_cell)))
     return np.clip(layer, 0, layers - 1).astype(np.int64)
 
 
-def balance(layer_counts, ranks):
+def edge_layers(width, inv_cell):
+    """How many cell layers of its slab, next to a cut, a rank reads back after a step: the halo's width, a layer a
+    particle may cross in a step, one a cut may move (balance's `most`), and one for the float32 rounding of a
+    coordinate on a layer's boundary. Particles deeper inside the slab neither leave it nor are in another rank's
+    halo, so they stay on the device."""
+    return math.ceil(width * inv_cell) + 3
+
+
+def balance(layer_counts, ranks, previous=None, most=None):
     """Cuts (ranks + 1 layer numbers) that split the layers, in order, into `ranks` runs of about equal particle
     counts: rank r takes the layers up to where the running count passes (r + 1) / ranks of the total; every
-    rank gets at least one layer. ValueError where there are fewer layers than ranks."""
+    rank gets at least one layer. With `previous` cuts and `most`, each cut moves at most `most` layers from its
+    previous place towards that. ValueError where there are fewer layers than ranks."""
     counts = np.asarray(layer_counts, np.int64)
     layers = len(counts)
     if layers < ranks:
@@ -54,6 +69,8 @@ def balance(layer_counts, ranks):
     targets = running[-1] * np.arange(1, ranks) / ranks
     cuts = np.searchsorted(running, targets, side="left") + 1  # (the layer whose count reaches the target: below)
     cuts = np.concatenate([[0], cuts, [layers]])
+    if previous is not None:
+        cuts = np.clip(cuts, np.asarray(previous) - most, np.asarray(previous) + most)
     for r in range(1, ranks):  # at least one layer each, from the bottom up, then from the top down
         cuts[r] = max(cuts[r], cuts[r - 1] + 1)
     for r in range(ranks - 1, 0, -1):

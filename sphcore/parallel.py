@@ -87,80 +87,81 @@ def take(particles, mask):
     return {name: values[mask] for name, values in particles.items()}
 
 
+def joined(parts):
+    """The particle arrays of `parts` (a list of dicts) in one dict."""
+    return {name: np.concatenate([p[name] for p in parts]) for name in LOADED}
+
+
 def in_id_order(parts):
     """The particle arrays of `parts` (a list of dicts) in one dict, rows in global-id order."""
-    joined = {name: np.concatenate([p[name] for p in parts]) for name in LOADED}
-    return take(joined, np.argsort(joined["particle_id"], kind="stable"))
+    whole = joined(parts)
+    return take(whole, np.argsort(whole["particle_id"], kind="stable"))
 
 
 class Rank:
-    """One rank's share of a Simulation `sim` over MPI communicator `comm`: its owned particles between steps
-    (`owned`, per-particle arrays of LOADED, in the device's order: what it holds is sorted by id at each load),
-    the cuts, and the step (module docstring)."""
+    """One rank's share of a Simulation `sim` (made with id_order) over MPI communicator `comm`: the particles of
+    its slab (owned) and of the others' near it (the halo) held on its device between steps, the cuts, and the
+    step (module docstring). After a step, the rows the sort gave each cell layer (`starts`) say which are
+    owned: the rows of the slab's layers."""
 
     def __init__(self, sim, comm):
         self.sim, self.comm, self.rank, self.size = sim, comm, comm.Get_rank(), comm.Get_size()
         names = [stage.name for stage in sim.stages]
         cut = names.index("reduce_dt") if "reduce_dt" in names else len(names)
-        self.before_dt, self.after_dt = sim.stages[:cut], sim.stages[cut + 1:]  # (reduce_dt: over the ranks)
+        self.before_dt, self.after_dt = sim.stages[:cut + 1], sim.stages[cut + 1:]  # (the dt: over the ranks)
         self.adaptive = cut < len(names)
-        self.seconds = dict.fromkeys(("exchange", "load", "stages", "dt", "keep"), 0.0)  # (a profile of step)
+        self.seconds = dict.fromkeys(("exchange", "stages", "dt"), 0.0)  # (a profile of step)
         P = sim.params[0]
         self.axis = decomposition.slab_axis(sim.dim)
-        self.box_min = float(P["box_min"][self.axis])
-        self.cell_size = 1.0 / float(P["inv_cell"])
+        self.box_min, self.inv_cell = float(P["box_min"][self.axis]), float(P["inv_cell"])
+        self.cell_size = 1.0 / self.inv_cell
         self.layers = int(P["grid_dim"][self.axis])
+        self.per_layer = int(np.prod(P["grid_dim"][:self.axis]))  # (cells.glsl: the layer is the slowest index)
         self.width = decomposition.halo_width(sim.scene)
-        everything = in_id_order([sim.backend.read(LOADED)])  # the start, the same on every rank
-        layer, _ = self.decompose(everything, summed=False)
-        self.owned = take(everything, decomposition.owners(layer, self.cuts) == self.rank)
+        self.edge = decomposition.edge_layers(self.width, self.inv_cell)
+        self.total = sim.n
+        everything = sim.backend.read(LOADED)  # the start, the same on every rank
+        x = everything["particle_x"][:, self.axis]
+        layer = self.layers_of(x)
+        self.cuts = decomposition.balance(np.bincount(layer, minlength=self.layers), self.size)
+        owner = decomposition.owners(layer, self.cuts)
+        self.starts = None  # (no step yet: the held set is loaded, not sorted)
+        self.start_owned = take(everything, owner == self.rank)  # (the start's snapshot)
+        sim.load(take(everything, self.needed_by(x, owner, self.cuts, self.rank)), self.owned_cells())
 
-    def decompose(self, particles, summed=True):
-        """Balance the cuts over the ranks' `particles` (the owned ones; at the start, unless `summed`, every
-        rank's all, whose counts are already the world's): (each particle's layer, its coordinate on the axis)."""
-        from mpi4py import MPI
-        x = particles["particle_x"][:, self.axis]
-        layer = decomposition.layers_of(x, self.box_min, self.cell_size, self.layers)
-        counts = np.bincount(layer, minlength=self.layers).astype(np.int64)
-        if summed:
-            self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
-        self.cuts = decomposition.balance(counts, self.size)
-        return layer, x
+    def layers_of(self, x):
+        return decomposition.layers_of(x, self.box_min, self.inv_cell, self.layers)
+
+    def needed_by(self, x, owner, cuts, rank):
+        return decomposition.needed_by(x, owner, cuts, self.box_min, self.cell_size, self.width, rank)
+
+    def owned_cells(self):
+        """The cells of this rank's slab (params.glsl: owned_first, owned_end)."""
+        return self.cuts[self.rank] * self.per_layer, self.cuts[self.rank + 1] * self.per_layer
+
+    def owned_rows(self):
+        """The rows of the particles this rank owns, after a step: those the sort put in its slab's layers."""
+        return self.starts[self.cuts[self.rank]], self.starts[self.cuts[self.rank + 1]]
 
     def step(self):
         """One step of the decomposed run ([1]-[5] of the module docstring); the seconds of each part add up in
-        `seconds`: exchange ([1], [2]: the cuts and the alltoall, staged through host memory), load ([3]), stages
-        ([4] but the dt), dt (its Allreduce, with the reads of v and a), keep ([5]: the read back)."""
+        `seconds`: exchange ([1]-[3]: the cuts, the edges read back, the alltoall, the rows written), stages
+        ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         start = time.perf_counter()
-        layer, x = self.decompose(self.owned)  # [1]
-        owner = decomposition.owners(layer, self.cuts)
-        sends = [take(self.owned, decomposition.needed_by(x, owner, self.cuts, self.box_min, self.cell_size,
-                                                          self.width, r)) for r in range(self.size)]
-        kept, sends[self.rank] = sends[self.rank], None  # (its own share stays: no message over 2 GiB on 1 rank)
-        received = self.comm.alltoall(sends)  # [2]
-        received[self.rank] = kept
-        held = in_id_order(received)
-        mine = decomposition.owners(decomposition.layers_of(held["particle_x"][:, self.axis], self.box_min,
-                                                            self.cell_size, self.layers), self.cuts) == self.rank
-        mine_ids = held["particle_id"][mine]
-        if not mine.any():  # (its dt would not be the world's: choose_dt reads at least one partial)
-            raise SimulationError(f"rank {self.rank} owns no particle at step {self.sim.step_count}: the "
-                                  f"{self.size} slabs are too thin for the flow; use fewer ranks")
+        if self.starts is not None:
+            self.exchange()  # [1]-[3]
         start = self.lap("exchange", start)
-        self.sim.load(held)  # [3]
-        start = self.lap("load", start)
         backend = self.sim.backend
         backend.run_stages(self.before_dt)  # [4]
         start = self.lap("stages", start)
         if self.adaptive:
-            self.reduce_dt(mine_ids, MPI)
+            self.reduce_dt(MPI)
             start = self.lap("dt", start)
-            backend.run_stages(self.after_dt)
-            start = self.lap("stages", start)
-        after = backend.read(LOADED)  # [5]
-        self.owned = take(after, np.isin(after["particle_id"], mine_ids))
-        self.lap("keep", start)
+        backend.run_stages(self.after_dt)
+        rows = np.arange(self.layers) * self.per_layer
+        self.starts = np.append(backend.read_entries("cell_start", rows), self.sim.n).astype(np.int64)
+        self.lap("stages", start)
         self.sim.step_count += 1
 
     def lap(self, part, start):
@@ -169,31 +170,73 @@ class Rank:
         self.seconds[part] += now - start
         return now
 
-    def reduce_dt(self, mine_ids, MPI):
-        """reduce_dt over every rank's owned particles: the largest |v|^2 and |a|^2 (in the shader's order of
-        operations and precision; a maximum is exact in any order) into the first of dt_partial, zeros after:
-        choose_dt then takes the world's dt on every rank."""
+    def reduce_dt(self, MPI):
+        """The dt over every rank's owned particles: reduce_dt's partials (of this rank's slab's rows alone) read
+        back, their largest |v|^2 and |a|^2 (a maximum is exact in any order) the largest over the ranks
+        (Allreduce), written as the first partial: choose_dt then takes the world's dt on every rank."""
         backend = self.sim.backend
-        v, a = backend.read_buffer("particle_v"), backend.read_buffer("particle_a")
-        mine = np.isin(backend.read_buffer("particle_id"), mine_ids)
-        v, a = v[mine], a[mine]
-        largest = np.zeros(2, v.dtype)
-        if len(v):
-            largest[0] = (v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]).max()
-            largest[1] = (a[:, 0] * a[:, 0] + a[:, 1] * a[:, 1] + a[:, 2] * a[:, 2]).max()
+        groups = -(-self.sim.n // backend.local_size)
+        partials = backend.read_rows("dt_partial", 0, groups)
+        largest = partials.max(axis=0) if groups else np.zeros(2, partials.dtype)
         self.comm.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
-        partial = np.zeros_like(backend.read_buffer("dt_partial"))
-        partial[0] = largest
-        backend.write_buffer("dt_partial", partial)
+        backend.write_rows("dt_partial", 0, largest[None])
+
+    def exchange(self):
+        """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
+        checked: none lost, none twice) and the new cuts, each moved a layer at most; the owned rows within `edge`
+        layers of a cut read back; to each other rank those it owns now or needs as halo (one alltoall); and the
+        rows rewritten: the slab's inside stays where it is, the edges' kept particles and the ones received
+        replace the old halo and edges (the sort puts every cell in id order whatever the rows: ID_ORDER)."""
+        from mpi4py import MPI
+        r, backend, starts = self.rank, self.sim.backend, self.starts
+        lo, hi = self.cuts[r], self.cuts[r + 1]
+        first, end = self.owned_rows()
+        counts = np.zeros(self.layers, np.int64)
+        counts[lo:hi] = np.diff(starts)[lo:hi]
+        self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
+        if counts.sum() != self.total:
+            raise SimulationError(f"step {self.sim.step_count}: the ranks own {counts.sum()} particles, not "
+                                  f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
+        cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
+        a = starts[min(lo + self.edge, hi)] if r > 0 else first  # the inside: rows a .. b - 1
+        b = max(a, starts[max(hi - self.edge, lo)] if r < self.size - 1 else end)
+        edges = {name: np.concatenate([backend.read_rows(name, first, a), backend.read_rows(name, b, end)])
+                 for name in LOADED}
+        x = edges["particle_x"][:, self.axis]
+        owner = decomposition.owners(self.layers_of(x), cuts)
+        sends = [take(edges, self.needed_by(x, owner, cuts, q)) for q in range(self.size)]
+        kept, sends[r] = sends[r], None  # (its own rows, and the ones it sends away but still sees)
+        received = self.comm.alltoall(sends)
+        received[r] = kept
+        new = joined(received)
+        m, inside = len(new["particle_id"]), b - a
+        if m < a:  # the inside's last rows fill the rows the new ones leave free below it
+            moved = min(a - m, inside)
+            backend.move_rows(b - moved, m, moved)
+        self.cuts = cuts
+        self.sim.resize(m + inside, self.owned_cells())
+        for name, values in new.items():
+            if m >= a:
+                backend.write_rows(name, 0, values[:a])
+                backend.write_rows(name, b, values[a:])
+            else:
+                backend.write_rows(name, 0, values)
+
+    def owned(self):
+        """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""
+        if self.starts is None:
+            return self.start_owned
+        first, end = self.owned_rows()
+        return {name: self.sim.backend.read_rows(name, first, end) for name in LOADED}
 
     def write_piece(self, series, out_dir, step, t):
         """Each rank writes its owned particles (in the device's order) as its piece of snapshot `step`; rank 0
         (`series`, the others None) lists the pieces in the run folder's manifest first and, once all are written,
         names them in the snapshot's .pvtp, listed in the .pvd."""
-        dim, pieces = self.sim.dim, None
-        x = self.owned["particle_x"][:, :dim]
-        data = {"velocity": self.owned["particle_v"][:, :dim], "density": self.owned["particle_rho"],
-                "pressure": self.owned["particle_p"]}
+        dim, pieces, owned = self.sim.dim, None, self.owned()
+        x = owned["particle_x"][:, :dim]
+        data = {"velocity": owned["particle_v"][:, :dim], "density": owned["particle_rho"],
+                "pressure": owned["particle_p"]}
         if series is not None:
             pieces = series.piece_names(step, self.size)
             for name in pieces:
@@ -205,14 +248,18 @@ class Rank:
             series.add_parallel(step, t, self.size, x, data)
 
     def gather(self):
-        """Rank 0: load every rank's owned particles, in id order, and return sim.read() (checked); others: None.
-        (The next step loads the rank's own share again.) A message a rank: a pickled gather's counts and
+        """Rank 0: load every rank's owned particles, in id order, read them (sim.read(): checked), keep the
+        checkpoint's and final.npz's arrays of that (`checkpoint`, `final`) and load its own held set back. A message a rank: a pickled gather's counts and
         displacements are 32-bit, and its whole would pass 2 GiB at about 27 M particles (80 bytes each)."""
         if self.rank != 0:
-            self.comm.send(self.owned, dest=0)
+            self.comm.send(self.owned(), dest=0)
             return None
-        self.sim.load(in_id_order([self.owned] + [self.comm.recv(source=r) for r in range(1, self.size)]))
-        return self.sim.read()
+        sim = self.sim
+        held = {name: sim.backend.read_rows(name, 0, sim.n) for name in LOADED}
+        sim.load(in_id_order([self.owned()] + [self.comm.recv(source=r) for r in range(1, self.size)]))
+        state = sim.read()
+        self.checkpoint, self.final = sim.checkpoint(), final_arrays(sim, state)
+        sim.load(held, self.owned_cells())  # (the rows as they were: starts still says whose they are)
 
 
 def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=None, backend="numba",
@@ -239,16 +286,16 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             run_folder.prepare(scene["name"], resume=False, overwrite=overwrite)
             run_folder.write_bytes("scene.json", scene.to_json().encode())
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
-        with Simulation(scene, backend, **options) as sim:
-            state = sim.read()  # (every rank: the start's energy, the bound of the later checks)
+        with Simulation(scene, backend, id_order=True, **options) as sim:
+            sim.read()  # (every rank: the start's energy, the bound of the later checks)
+            if root:
+                run_folder.savez(CHECKPOINT, **sim.checkpoint())
             rank = Rank(sim, comm)
 
             def snapshot():
                 rank.write_piece(series if root else None, out_dir, sim.step_count, sim.time)
 
             snapshot()
-            if root:
-                run_folder.savez(CHECKPOINT, **sim.checkpoint())
             t = schedule.time(sim)
             with schedule.progress(sim, t, disable=not (progress and root),
                                    desc=f"{scene['name']} [{backend} x {rank.size} ranks]") as bar:
@@ -259,14 +306,13 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                     if schedule.snapshot_due(sim, before, t):
                         snapshot()
                     if schedule.checkpoint_due(sim) or schedule.done(sim, t):
-                        state = rank.gather()
+                        rank.gather()
                         if root:
-                            run_folder.savez(CHECKPOINT, **sim.checkpoint())
+                            run_folder.savez(CHECKPOINT, **rank.checkpoint)
             if not root:
                 return None
-            arrays = final_arrays(sim, state)
-            run_folder.savez("final.npz", **arrays)
-            return arrays
+            run_folder.savez("final.npz", **rank.final)
+            return rank.final
 
 
 def main(run_args):

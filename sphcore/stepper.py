@@ -89,9 +89,10 @@ class Simulation:
     _closed = False
     _user = None  # (thread name, method) of the call inside the simulation now (_exclusive)
 
-    def __init__(self, scene, backend="numba", *, poll=None, **backend_options):
+    def __init__(self, scene, backend="numba", *, poll=None, id_order=False, **backend_options):
         """`poll()` is called between the start-up's stages (after each kernel is compiled): a safe
-        point where sphcore.run stops on a signal. The host memory the run will need is checked
+        point where sphcore.run stops on a signal. `id_order`: the grid orders each cell's particles by id,
+        not by their previous index (ID_ORDER: a rank of sphcore.parallel, whose rows change every step). The host memory the run will need is checked
         first (sphcore.memory): a run that would not fit is refused before anything is allocated. The
         simulation keeps its own copy of `scene`, checked again (Scene.validated): a change made to the
         scene after it was loaded is checked, and one made later does not reach the run."""
@@ -115,7 +116,7 @@ class Simulation:
         x0 = np.concatenate([x0, walls]).astype(x0.dtype)
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n, self.fluid_count)
-        self.spec = scene.spec_for(backend)  # (neighbour lists with the state equation too, where they fit)
+        self.spec = scene.spec_for(backend)._replace(ID_ORDER=id_order)  # (the state equation's lists: spec_for)
         counts = np.bincount(self.wall_body, minlength=len(scene.bodies)).tolist()
         firsts = (self.fluid_count + np.cumsum([0] + counts[:-1])).tolist()
         self.body_ids = {body.name: (first, count, body.centroid)  # each body's ids: first, count; its centre
@@ -284,27 +285,41 @@ class Simulation:
         return arrays
 
     @_exclusive
-    def load(self, particles):
+    def load(self, particles, owned_cells=(0, 0)):
         """Hold another set of particles from now on: `particles` maps every per-particle buffer of CARRIED
         (LOADED) to an array, rows in any order, with the particles' global ids in particle_id (ids of
         fluid_count and up are the bodies' wall particles). The other carried buffers (the time, the grid's
         status, the iteration control) and the obstacles are kept, every other buffer is zeroed (as at the
         start), and the next step builds its neighbour lists. A rank of sphcore.parallel loads its owned and halo
-        particles before each step. The backend stays (no compile, no new Vulkan device): its buffers keep their
+        particles at the start; `owned_cells`: the cells of its slab (params.glsl: owned_first, owned_end; (0, 0):
+        every particle is owned). The backend stays (no compile, no new Vulkan device): its buffers keep their
         size while the set fits, n in the parameter block (Vulkan: its uniform) becomes the count, and the
         dispatch sizes follow it (backends: load). read() and checkpoint() check and save the whole scene: call
         them with every particle loaded."""
         if self.gauges is not None:
             raise SimulationError("Simulation.load(): the scene's gauges sample by particle id across the whole "
                                   "scene; a scene with [[gauges]] cannot load another particle set yet")
-        n = len(particles["particle_id"])
-        params = self.scene.params(n, self.fluid_count)
         kept = [name for name in CARRIED if name not in LOADED] + ["obstacle_box"]
+        params = self._count(len(particles["particle_id"]), owned_cells)
         self.backend.load(params, {name: particles[name] for name in LOADED}, kept)
+
+    @_exclusive
+    def resize(self, n, owned_cells=(0, 0)):
+        """Hold n particles from now on, the rows up to the old count as they are (a rank of sphcore.parallel
+        writes the rows that change: backend.write_rows); `owned_cells` as load's. The next step builds its
+        neighbour lists."""
+        self.backend.resize(self._count(n, owned_cells))
+
+    def _count(self, n, owned_cells):
+        """The parameter block of n particles and `owned_cells`, taken as the simulation's; the next step builds its
+        lists (those of the set held before are of other rows)."""
+        params = self.scene.params(n, self.fluid_count)
+        params[0]["owned_first"], params[0]["owned_end"] = owned_cells
         self.params, self.n, self._carried = params, n, None
         control = self.backend.read_buffer("control")
-        control[CONTROL_REBUILD] = 1  # (the lists of the set held before are of other particles)
+        control[CONTROL_REBUILD] = 1
         self.backend.write_buffer("control", control)
+        return params
 
     @_exclusive
     def restore(self, arrays):

@@ -53,7 +53,7 @@ def test_each_particle_owned_once_and_the_halo_covers_two_reaches():
     rng = np.random.default_rng(5)
     x = rng.uniform(0.0, 1.0, size=(2000, 2))
     box_min, cell_size, layers, h = 0.0, 0.05, 20, 0.04
-    layer = decomposition.layers_of(x[:, 1], box_min, cell_size, layers)
+    layer = decomposition.layers_of(x[:, 1], box_min, 1 / cell_size, layers)
     cuts = decomposition.balance(np.bincount(layer, minlength=layers), 3)
     owner = decomposition.owners(layer, cuts)
     assert set(owner.tolist()) == {0, 1, 2}
@@ -269,7 +269,7 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     layers = int(P["grid_dim"][axis])
     owner = []
     for x in (scene.initial_positions(), two["position"]):
-        layer = decomposition.layers_of(x[:, axis], P["box_min"][axis], 1 / P["inv_cell"], layers)
+        layer = decomposition.layers_of(x[:, axis], P["box_min"][axis], P["inv_cell"], layers)
         owner.append(decomposition.owners(layer, decomposition.balance(np.bincount(layer, minlength=layers), 2)))
     assert (owner[0] != owner[1]).sum() > 0
     # the checkpoint of 2 ranks resumes on one (sphcore run --resume), to the bits the 1-rank driver's resumes to

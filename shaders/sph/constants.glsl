@@ -51,3 +51,6 @@ layout(constant_id = 28) const uint SHIFTING = 0;         // 0: none, 1: Lind et
 // Bodies from meshes and polygons (issue 33): Adami et al. 2012's wall particles, the particles whose id is
 // P.fluid_count or more (wall_pressure.comp gives them the fluid's pressure and velocity; integrate leaves them).
 layout(constant_id = 29) const bool BODIES = false;       // the scene has [[bodies]] (sphcore/geometry.py)
+// One run on several ranks (issue 34: sphcore.parallel): a rank holds its own particles and others' near its slab.
+layout(constant_id = 30) const bool ID_ORDER = false;     // sort_cells orders a cell's particles by id (else by index):
+                                                          // the same order whatever rows a rank holds them in

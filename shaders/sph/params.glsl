@@ -42,6 +42,9 @@ layout(std140, binding = 63) uniform Params {
     // -- particle shifting (issue 31: physics.shifting, shifting.glsl)
     float shifting_coef;  // A h_s [m], h_s = h / 2: D = shifting_coef |v_i| dt (Skillen et al. 2013; fluid.shifting)
     float shifting_w;     // 1 / kernel_w(dx^2): Lind et al. 2012's W_ij / W(dx) = kernel_w(r2) shifting_w
+    // -- one run on several ranks (issue 34: sphcore.parallel)
+    uint owned_first;     // the cells of the rank's slab, owned_first .. owned_end - 1: reduce_dt takes the rows the
+    uint owned_end;       // sort gave them (owned_end 0: every particle, as on one rank)
 } P;
 
 // Per dispatch (push constants: 128 bytes on lavapipe, so only what changes between dispatches).

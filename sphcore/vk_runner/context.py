@@ -62,31 +62,52 @@ class Buffer:
             usage |= vk.VK_BUFFER_USAGE_CONDITIONAL_RENDERING_BIT_EXT
         self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, name)
 
-    def write(self, array):
+    def write(self, array, offset=0):
+        """Write `array`'s bytes into the buffer from byte `offset` on."""
         data = np.ascontiguousarray(array)
-        if data.nbytes > self.nbytes:
-            raise ValueError(f"{self.name}: {data.nbytes} bytes do not fit in {self.nbytes}")
+        if offset + data.nbytes > self.nbytes:
+            raise ValueError(f"{self.name}: {data.nbytes} bytes at {offset} do not fit in {self.nbytes}")
         if data.nbytes == 0:
             return
         if self.host_visible:
-            self.ctx._write_mapped(self.memory, data)
+            self.ctx._write_mapped(self.memory, data, offset)
         else:
             staging = self.ctx._staging(data.nbytes)
             self.ctx._write_mapped(staging.memory, data)
-            self.ctx._copy(staging.buffer, self.buffer, data.nbytes)
+            self.ctx._copy(staging.buffer, self.buffer, [(0, offset, data.nbytes)])
             self.ctx._release(staging)
 
-    def read(self, dtype, shape):
+    def read(self, dtype, shape, offset=0):
+        """The buffer's bytes from byte `offset` on, as an array of `dtype` and `shape`."""
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
         if nbytes == 0:
             return np.zeros(shape, dtype)
         if self.host_visible:
-            return self.ctx._read_mapped(self.memory, nbytes).view(dtype).reshape(shape)
+            return self.ctx._read_mapped(self.memory, nbytes, offset).view(dtype).reshape(shape)
+        return self.gather(dtype, [(offset, nbytes)]).reshape(shape)
+
+    def gather(self, dtype, regions):
+        """The bytes of `regions` ((byte offset, byte count) each), one after the other, as an array of `dtype`:
+        one copy of many regions (a few words of a large buffer, without reading all of it)."""
+        nbytes = sum(count for _, count in regions)
+        if nbytes == 0:
+            return np.zeros(0, dtype)
+        if self.host_visible:
+            return np.concatenate([self.ctx._read_mapped(self.memory, count, offset)
+                                   for offset, count in regions]).view(dtype)
         staging = self.ctx._staging(nbytes)
-        self.ctx._copy(self.buffer, staging.buffer, nbytes)
-        out = self.ctx._read_mapped(staging.memory, nbytes).view(dtype).reshape(shape)
+        ends = np.cumsum([0] + [count for _, count in regions]).tolist()
+        self.ctx._copy(self.buffer, staging.buffer, [(offset, end, count)
+                                                     for (offset, count), end in zip(regions, ends)])
+        out = self.ctx._read_mapped(staging.memory, nbytes).view(dtype)
         self.ctx._release(staging)
         return out
+
+    def copy_within(self, regions):
+        """Copy (source byte offset, destination byte offset, byte count) `regions` of the buffer within it,
+        on the device (regions must not overlap)."""
+        if regions:
+            self.ctx._copy(self.buffer, self.buffer, regions)
 
     def free(self):
         if self.buffer is not None:
@@ -517,23 +538,23 @@ class Context:
         vk.vkBindBufferMemory(self.device, buffer, memory, 0)
         return buffer, memory, flags & host == host
 
-    def _map(self, memory, nbytes):
+    def _map(self, memory, nbytes, offset=0):
         vk = self.vk
         try:
-            return vk.vkMapMemory(self.device, memory, 0, nbytes, 0)
+            return vk.vkMapMemory(self.device, memory, offset, nbytes, 0)
         except (vk.VkErrorMemoryMapFailed, vk.VkErrorDeviceLost, vk.VkErrorOutOfHostMemory) as e:
             raise VulkanError(f"could not map {nbytes / 2**20:.1f} MiB of memory on {self.device_name} "
                               f"({type(e).__name__}): use fewer particles or --backend numba") from None
 
-    def _write_mapped(self, memory, data):
+    def _write_mapped(self, memory, data, offset=0):
         vk = self.vk
-        mapped = self._map(memory, data.nbytes)
+        mapped = self._map(memory, data.nbytes, offset)
         vk.ffi.memmove(mapped, vk.ffi.from_buffer(data), data.nbytes)
         vk.vkUnmapMemory(self.device, memory)
 
-    def _read_mapped(self, memory, nbytes):
+    def _read_mapped(self, memory, nbytes, offset=0):
         vk = self.vk
-        mapped = self._map(memory, nbytes)
+        mapped = self._map(memory, nbytes, offset)
         out = np.frombuffer(mapped, np.uint8, nbytes).copy()  # copy before the view dies with unmap
         vk.vkUnmapMemory(self.device, memory)
         return out
@@ -552,10 +573,11 @@ class Context:
         if staging is not self._kept_staging:
             staging.free()
 
-    def _copy(self, src, dst, nbytes):
+    def _copy(self, src, dst, regions):
+        """Copy (source offset, destination offset, bytes) `regions` from buffer `src` to `dst`, and wait."""
         rec = Recording(self)
-        self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, 1,
-                                [self.vk.VkBufferCopy(srcOffset=0, dstOffset=0, size=nbytes)])
+        self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, len(regions),
+                                [self.vk.VkBufferCopy(srcOffset=a, dstOffset=b, size=n) for a, b, n in regions])
         self.submit(rec.end())
         rec.free()
 
