@@ -7,12 +7,13 @@ staged through host memory, takes of it. Run under mpiexec (benchmarks/parallel_
 The scene is steps_per_second.py's 3D dam break (Tait, h = 2 dx, fixed dt, a sort every step; its block's
 lattice: the count rounded up to a cube), cut in slabs along z. Rank r runs on its host's r-th GPU
 (parallel.rank_device; --device overrides). After --warmup steps (shader builds, first recordings), --steps steps
-are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the particles
-picked, the pickled alltoall, the sort by id), load (host -> device: Simulation.load), stages (the plan on the
-device), dt (the dt's Allreduce; none at a fixed dt) and keep (device -> host: the owned particles read back).
+are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the edges'
+positions and the halo's rows read back, the pickled alltoall, the new halo written: what crosses the host),
+stages (the plan on the device) and dt (the partials read back and their Allreduce; none at a fixed dt).
 The step's time is the slowest rank's (they wait for each other in the alltoall). With --plain, rank 0 of a 1-rank
-run then times a plain Simulation of the same scene (its particles resident on the GPU: the baseline the
-decomposed runs are measured against). Appends one JSON line to --out (and prints it).
+run then times a plain Simulation of the same scene, as a run on one GPU is (the baseline the decomposed runs
+are measured against), and one with id_order (the grid's cells in id order, as the ranks sort them). Appends one
+JSON line to --out (and prints it).
 """
 import argparse
 import json
@@ -29,8 +30,8 @@ import sphcore  # noqa: E402
 from sphcore import parallel  # noqa: E402
 from steps_per_second import make_case  # noqa: E402
 
-PARTS = ("exchange", "load", "stages", "dt", "keep")
-HOST = ("exchange", "load", "keep")  # the parts that move particles through host memory
+PARTS = parallel.PARTS
+HOST = ("exchange",)  # the part that moves particles through host memory (the next five are its parts)
 
 
 def main():
@@ -52,7 +53,7 @@ def main():
     if args.backend == "vulkan":
         options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
     start = time.perf_counter()
-    with sphcore.Simulation(scene, args.backend, **options) as sim:
+    with sphcore.Simulation(scene, args.backend, id_order=True, **options) as sim:
         rank = parallel.Rank(sim, comm)
         for _ in range(args.warmup):
             rank.step()
@@ -66,7 +67,8 @@ def main():
             held += sim.n
         comm.Barrier()
         seconds = time.perf_counter() - start
-        row = {"rank": rank_number, "device": sim.device_name, "owned": len(rank.owned["particle_id"]),
+        first, end = rank.owned_rows()
+        row = {"rank": rank_number, "device": sim.device_name, "owned": int(end - first),
                "held_mean": held / args.steps, **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
         n = sim.fluid_count
     rows = comm.gather(row, root=0)
@@ -80,13 +82,14 @@ def main():
               **{f"{p}_ms_slowest": slowest[p] for p in PARTS}, "setup_seconds": setup, "per_rank": rows,
               "machine": platform.node(), "mpi": MPI.Get_library_version().split(",")[0].strip()}
     if args.plain and size == 1:
-        with sphcore.Simulation(scene, args.backend, **options) as sim:
-            sim.step(args.warmup)
-            sim.read()
-            start = time.perf_counter()
-            sim.step(args.steps)
-            sim.backend.read_buffer("grid_status")  # (a sync: a read of a few words, not of every particle)
-            result["plain_ms_per_step"] = 1e3 * (time.perf_counter() - start) / args.steps
+        for key, id_order in (("plain_ms_per_step", False), ("plain_id_order_ms_per_step", True)):
+            with sphcore.Simulation(scene, args.backend, id_order=id_order, **options) as sim:
+                sim.step(args.warmup)
+                sim.read()
+                start = time.perf_counter()
+                sim.step(args.steps)
+                sim.backend.read_buffer("grid_status")  # (a sync: a read of a few words, not of every particle)
+                result[key] = 1e3 * (time.perf_counter() - start) / args.steps
     line = json.dumps(result)
     print(line, flush=True)
     if args.out:

