@@ -4,7 +4,8 @@
 (`particle_surface`: the isosurface of the colour field), and writes next to each other
 <name>_surface_<step>.png and <name>_surface_<step>.vtp (or .ply), the camera fixed for the whole
 run, and <name>_surface.pvd, which gives ParaView each mesh's time. These names never are a run's
-(its snapshots are <name>_<step>.vtp): an out_dir where one would be is refused. A run with bodies
+(its snapshots are <name>_<step>.vtp, or <name>_<step>.pvtp of the MPI driver, whose pieces
+<name>_<step>_p<rank>.vtp are joined): an out_dir where one would be is refused. A run with bodies
 has their wall particles in walls.vtp: each picture draws them in grey, about a spacing wide.
 
 Offscreen: with no X display, VTK is pointed at its EGL render window (Mesa's llvmpipe through
@@ -24,7 +25,7 @@ from tqdm import tqdm
 from sphcore import output
 from sphcore.errors import SceneError
 from sphcore.folder import listed, names_of_run
-from sphcore.output import snapshot_step
+from sphcore.output import entry_step
 from sphcore.plot import read_final
 from sphcore.scene import Scene
 from sphcore.surface import particle_surface
@@ -189,22 +190,52 @@ def load_run(run_dir):
     times = dict(read_pvd(pvd)) if pvd.is_file() else {}
     if pvd.is_file():
         files = [run_dir / name for name in times]
-    else:  # NAME_NNNNNNN.vtp, not NAME_surface_NNNNNNN.vtp
-        snapshot = re.compile(re.escape(scene["name"]) + r"_\d+\.vtp")
-        files = [f for f in run_dir.glob(f"{scene['name']}_*.vtp") if snapshot.fullmatch(f.name)]
+    else:  # NAME_NNNNNNN.vtp or .pvtp, not NAME_surface_NNNNNNN.vtp nor a piece NAME_NNNNNNN_pR.vtp
+        snapshot = re.compile(re.escape(scene["name"]) + r"_\d+\.p?vtp")
+        files = [f for f in run_dir.glob(f"{scene['name']}_*vtp") if snapshot.fullmatch(f.name)]
     gone = [f.name for f in files if not f.is_file()]
     if gone:
         print(f"sphcore render: note: {pvd} lists {len(gone)} snapshot(s) that are gone ({gone[0]}"
               f"{', ...' if len(gone) > 1 else ''}); rendering the others", file=sys.stderr)
-    files = sorted({f for f in files if f.is_file() and snapshot_step(f) >= 0}, key=snapshot_step)
+    files = sorted({f for f in files if f.is_file() and entry_step(f) >= 0}, key=entry_step)
     if not files:
-        raise SceneError(f"{run_dir}: no snapshots ({scene['name']}_<step>.vtp) to render")
+        raise SceneError(f"{run_dir}: no snapshots ({scene['name']}_<step>.vtp or .pvtp) to render")
     return scene, files, times
 
 
+def pieces(path):
+    """The pieces of parallel snapshot `path` (a .pvtp): the .vtp files its <Piece Source=...> name, beside
+    it, or SceneError naming it (and the piece that is missing)."""
+    path = Path(path)
+    try:
+        sources = [p.get("Source") for p in ET.parse(path).getroot().findall("PPolyData/Piece")]
+    except (OSError, ET.ParseError) as e:
+        raise SceneError(f"{path}: not a readable parallel snapshot ({str(e)[:200]})") from None
+    if not sources or not all(s and s.endswith(".vtp") for s in sources):
+        raise SceneError(f"{path}: not a readable parallel snapshot (no <Piece Source=...> naming a .vtp)")
+    for s in sources:
+        if not (path.parent / s).is_file():
+            raise SceneError(f"{path}: its piece {s} is missing (a .pvtp's pieces lie beside it)")
+    return [path.parent / s for s in sources]
+
+
+def each_piece(path, read):
+    """[read(piece)] for each piece of parallel snapshot `path`; a piece's SceneError is named as the .pvtp's."""
+    done = []
+    for piece in pieces(path):
+        try:
+            done.append(read(piece))
+        except SceneError as e:
+            raise SceneError(f"{path}: piece {e}") from None
+    return done
+
+
 def read_positions(path):
-    """Particle positions (N, 3) float32 of a .vtp snapshot, or SceneError naming the file: a truncated
-    or garbled file, or one with fewer points than its header says."""
+    """Particle positions (N, 3) float32 of a .vtp snapshot, or of a .pvtp (its pieces' joined, in the order
+    it names them), or SceneError naming the file: a truncated or garbled file, or one with fewer points than
+    its header says; for a .pvtp, also a missing piece."""
+    if Path(path).suffix == ".pvtp":
+        return np.concatenate(each_piece(path, read_positions))
     import pyvista as pv
     from pyvista.core.utilities import VtkErrorCatcher
     from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
@@ -230,8 +261,11 @@ def read_positions(path):
 
 
 def check_complete(path):
-    """SceneError naming a snapshot that does not end in </VTKFile> (a truncated file): checked for
-    every snapshot before the first frame is drawn, the whole file only when it is read."""
+    """SceneError naming a snapshot that does not end in </VTKFile> (a truncated file), or a .pvtp with
+    such a piece or a missing one: checked for every snapshot before the first frame is drawn, the whole
+    file only when it is read."""
+    if Path(path).suffix == ".pvtp":
+        each_piece(path, check_complete)
     try:
         with open(path, "rb") as f:
             f.seek(max(f.seek(0, os.SEEK_END) - 64, 0))
@@ -243,8 +277,8 @@ def check_complete(path):
 
 
 def surface_name(scene_name, snapshot):
-    """The stem of the surface of snapshot NAME_NNNNNNN.vtp: NAME_surface_NNNNNNN (never a run's name)."""
-    return f"{scene_name}_surface_{snapshot_step(snapshot):07d}"
+    """The stem of the surface of snapshot NAME_NNNNNNN.vtp or .pvtp: NAME_surface_NNNNNNN (never a run's name)."""
+    return f"{scene_name}_surface_{entry_step(snapshot):07d}"
 
 
 def refuse_clash(out_dir, names):
@@ -273,7 +307,7 @@ def write_pvd(path, entries):
 
 def render_run(run_dir, out_dir, backend="numba", spacing=None, level=0.5, particles=False, every=1,
                mesh_format="vtp", progress=True):
-    """Surface mesh and picture of every `every`-th snapshot NAME_NNNNNNN.vtp of a 3D run:
+    """Surface mesh and picture of every `every`-th snapshot NAME_NNNNNNN.vtp or .pvtp of a 3D run:
     out_dir/NAME_surface_NNNNNNN.png and .vtp or .ply (points, triangles wound outwards, point
     normals "Normals"), from one camera fixed by the scene's box, and (vtp, where the run's .pvd
     gives the snapshots' times) out_dir/NAME_surface.pvd listing each mesh with its time, rewritten
