@@ -53,8 +53,9 @@ def main():
     if args.backend == "vulkan":
         options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
     start = time.perf_counter()
-    with sphcore.Simulation(scene, args.backend, id_order=True, **options) as sim:
-        rank = parallel.Rank(sim, comm)
+    cuts, keep = parallel.share(scene, size, rank_number)
+    with sphcore.Simulation(scene, args.backend, id_order=True, keep=keep, **options) as sim:
+        rank = parallel.Rank(sim, comm, cuts)
         for _ in range(args.warmup):
             rank.step()
         setup = time.perf_counter() - start

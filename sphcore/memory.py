@@ -147,10 +147,10 @@ def available():
     return limits
 
 
-def shortfall(scene, backend="numba", device_in_host=None):
-    """None if a run of `scene` fits the memory available, else (needed, available, where) of the
-    first limit it exceeds."""
-    needed, _ = estimate(scene, backend, device_in_host)
+def shortfall(scene, backend="numba", device_in_host=None, n=None):
+    """None if a run of `scene` (of n particles: a rank's share) fits the memory available, else (needed,
+    available, where) of the first limit it exceeds."""
+    needed, _ = estimate(scene, backend, device_in_host, n)
     for free, where, virtual in available():
         if needed + (ADDRESS_SPACE if virtual else 0) > free:
             return needed + (ADDRESS_SPACE if virtual else 0), free, where
@@ -161,14 +161,14 @@ def fits(scene, backend="numba", device_in_host=None):
     return shortfall(scene, backend, device_in_host) is None
 
 
-def check(scene, backend="numba", device_in_host=None):
-    """Raise MemoryLimitError (one line: both figures and what would fit) if a run of `scene` on
-    `backend` would not fit in the memory available."""
-    short = shortfall(scene, backend, device_in_host)
+def check(scene, backend="numba", device_in_host=None, n=None):
+    """Raise MemoryLimitError (one line: both figures and what would fit) if a run of `scene` (of n particles:
+    a rank's share) on `backend` would not fit in the memory available."""
+    short = shortfall(scene, backend, device_in_host, n)
     if short is None:
         return
     needed, free, where = short
-    n = particle_count(scene)
+    n = particle_count(scene) if n is None else n
     fixed = estimate(scene, backend, device_in_host, n=0)[0]
     per_particle = (estimate(scene, backend, device_in_host)[0] - fixed) / max(n, 1)
     room = free - fixed - (needed - estimate(scene, backend, device_in_host)[0])

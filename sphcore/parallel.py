@@ -1,24 +1,27 @@
-"""One scene on N MPI ranks (issue 34, first slice; docs/parallel.md): `mpiexec -n N sphcore run SCENE`, or
+"""One scene on N MPI ranks (issue 34; docs/parallel.md): `mpiexec -n N sphcore run SCENE`, or
 `sphcore.parallel.run` under mpiexec, on the numba or the Vulkan backend (rank r of a host on its r-th GPU).
 
-Each rank holds a Simulation of the scene (sphcore.stepper) and owns a slab of the domain (sphcore.decomposition).
-Every step, through host memory (mpi4py's pickled alltoall):
-  [1] the cuts: each rank's particles per cell layer, summed over the ranks (Allreduce), balanced (balance);
-  [2] each rank sends every other the particles it owns that the other owns now (migration) or must see (halo);
-  [3] each rank loads what it holds, in global-id order (Simulation.load), so every cell's particles are in
-      id order after the step's sort, on any number of ranks: a sum over a cell runs in the same order;
-  [4] it runs the plan's stages (on Vulkan in two submissions), reduce_dt replaced by the maximum over the
-      ranks' owned particles (Allreduce): every rank's choose_dt takes the same dt, the minimum over the ranks;
-  [5] it keeps its owned particles' new state.
+Each rank owns a slab of the domain (sphcore.decomposition) and builds a Simulation (sphcore.stepper) of its share
+alone: its particles and those of the others within the halo's width (share). They stay on its device; the grid
+orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell runs in the same order whatever rows
+a rank holds them in. A step:
+  [1] the cuts: each rank's owned particles per cell layer (from the rows the last sort gave each layer), summed
+      over the ranks (Allreduce, their total checked) and balanced, each cut moved a layer at most;
+  [2] the owned rows near a cut read back (positions first); to every other rank those it owns now (migration)
+      or must see (halo), in one alltoall through host memory;
+  [3] the received ones written over the old halo's rows;
+  [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
+      largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
+      takes the same dt, the minimum over the ranks.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0 in particle-id
 order and written there as a 1-rank run writes them; a checkpoint resumes on one rank (`sphcore run --resume`).
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
 
-N ranks give bitwise the state of this driver on 1 rank (tests/test_parallel.py). A plain Simulation orders a
-cell's particles by their previous index, not their id, so its sums run in another order: a few ulps away at
-first, then as far apart as a flow lets two runs drift.
+N ranks give bitwise the state of a Simulation with id_order on one process (tests/test_parallel.py). A plain
+Simulation orders a cell's particles by their previous index, not their id, so its sums run in another order: a
+few ulps away at first, then as far apart as a flow lets two runs drift.
 """
 import contextlib
 import os
@@ -32,6 +35,7 @@ from sphcore import decomposition, folder
 from sphcore.checkpoint import CHECKPOINT
 from sphcore.errors import SceneError, SimulationError
 from sphcore.output import SnapshotSeries, write_vtp
+from sphcore.plan import buffer_dtype
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.stepper import LOADED, Simulation
 from sphcore.vk_runner import Context
@@ -103,42 +107,73 @@ def in_id_order(parts):
 PARTS = ("exchange", "counts", "edges", "rows", "alltoall", "write", "stages", "dt")
 
 
-class Rank:
-    """One rank's share of a Simulation `sim` (made with id_order) over MPI communicator `comm`: the particles of
-    its slab (owned) and of the others' near it (the halo) held on its device between steps, the cuts, and the
-    step (module docstring). After a step, the rows the sort gave each cell layer (`starts`) say which are
-    owned: the rows of the slab's layers."""
+class Slabs:
+    """The slabs of a scene's grid (sphcore.decomposition, from the parameter block `params`): the axis, each
+    particle's layer as the device's grid finds it, the halo's width and the edges' depth."""
 
-    def __init__(self, sim, comm):
-        self.sim, self.comm, self.rank, self.size = sim, comm, comm.Get_rank(), comm.Get_size()
-        names = [stage.name for stage in sim.stages]
-        cut = names.index("reduce_dt") if "reduce_dt" in names else len(names)
-        self.before_dt, self.after_dt = sim.stages[:cut + 1], sim.stages[cut + 1:]  # (the dt: over the ranks)
-        self.adaptive = cut < len(names)
-        self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
-        P = sim.params[0]
-        self.axis = decomposition.slab_axis(sim.dim)
+    def __init__(self, scene, params):
+        P = params[0]
+        self.axis = decomposition.slab_axis(scene.dim)
         self.box_min, self.inv_cell = float(P["box_min"][self.axis]), float(P["inv_cell"])
         self.cell_size = 1.0 / self.inv_cell
         self.layers = int(P["grid_dim"][self.axis])
         self.per_layer = int(np.prod(P["grid_dim"][:self.axis]))  # (cells.glsl: the layer is the slowest index)
-        self.width = decomposition.halo_width(sim.scene)
+        self.width = decomposition.halo_width(scene)
         self.edge = decomposition.edge_layers(self.width, self.inv_cell)
-        self.total = sim.n
-        everything = sim.backend.read(LOADED)  # the start, the same on every rank
-        x = everything["particle_x"][:, self.axis]
-        layer = self.layers_of(x)
-        self.cuts = decomposition.balance(np.bincount(layer, minlength=self.layers), self.size)
-        owner = decomposition.owners(layer, self.cuts)
-        self.starts = None  # (no step yet: the held set is loaded, not sorted)
-        self.start_owned = take(everything, owner == self.rank)  # (the start's snapshot)
-        sim.load(take(everything, self.needed_by(x, owner, self.cuts, self.rank)), self.owned_cells())
 
     def layers_of(self, x):
         return decomposition.layers_of(x, self.box_min, self.inv_cell, self.layers)
 
     def needed_by(self, x, owner, cuts, rank):
         return decomposition.needed_by(x, owner, cuts, self.box_min, self.cell_size, self.width, rank)
+
+
+def share(scene, ranks, rank, precision=np.float32):
+    """The start of rank `rank` of `ranks`: (cuts, keep), the cuts balanced over the scene's initial particles and
+    the mask of those the rank holds (its own, its halo). Every rank computes the same from the scene's lattice
+    (positions only, at the buffers' `precision`); each builds its Simulation of these alone (keep)."""
+    x = scene.initial_positions().astype(precision)
+    slabs = Slabs(scene, scene.params(len(x)))
+    coordinate = x[:, slabs.axis]
+    layer = slabs.layers_of(coordinate)
+    cuts = decomposition.balance(np.bincount(layer, minlength=slabs.layers), ranks)
+    return cuts, slabs.needed_by(coordinate, decomposition.owners(layer, cuts), cuts, rank)
+
+
+# The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the edges'
+# positions read back and the halo picked, its rows read back, the alltoall, the rows written), the stages, the dt.
+PARTS = ("exchange", "counts", "edges", "rows", "alltoall", "write", "stages", "dt")
+
+
+class Rank:
+    """One rank's share of a scene over MPI communicator `comm`, held by `sim` (a Simulation made with id_order and
+    keep: share's): the particles of its slab (owned) and of the others' near it (the halo) on its device between
+    steps, the cuts (at the start share's), and the step (module docstring). After a step, the rows the sort gave
+    each cell layer (`starts`) say which are owned: the rows of the slab's layers."""
+
+    def __init__(self, sim, comm, cuts):
+        self.sim, self.comm, self.rank, self.size = sim, comm, comm.Get_rank(), comm.Get_size()
+        names = [stage.name for stage in sim.stages]
+        cut = names.index("reduce_dt") if "reduce_dt" in names else len(names)
+        self.before_dt, self.after_dt = sim.stages[:cut + 1], sim.stages[cut + 1:]  # (the dt: over the ranks)
+        self.adaptive = cut < len(names)
+        self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
+        self.slabs = Slabs(sim.scene, sim.params)
+        self.axis, self.layers, self.per_layer, self.edge = (self.slabs.axis, self.slabs.layers,
+                                                             self.slabs.per_layer, self.slabs.edge)
+        self.total = sim.scene.particle_count()
+        self.cuts = np.asarray(cuts)
+        held = sim.backend.read(LOADED)
+        owner = decomposition.owners(self.layers_of(held["particle_x"][:, self.axis]), self.cuts)
+        self.start_owned = take(held, owner == self.rank)  # (the start's snapshot)
+        self.starts = None  # (no step yet: the held set is not sorted)
+        sim.resize(sim.n, self.owned_cells())
+
+    def layers_of(self, x):
+        return self.slabs.layers_of(x)
+
+    def needed_by(self, x, owner, cuts, rank):
+        return self.slabs.needed_by(x, owner, cuts, rank)
 
     def owned_cells(self):
         """The cells of this rank's slab (params.glsl: owned_first, owned_end)."""
@@ -149,7 +184,7 @@ class Rank:
         return self.starts[self.cuts[self.rank]], self.starts[self.cuts[self.rank + 1]]
 
     def step(self):
-        """One step of the decomposed run ([1]-[5] of the module docstring); the seconds of each part add up in
+        """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
         `seconds`: exchange ([1]-[3]: the cuts, the edges read back, the alltoall, the rows written), stages
         ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
@@ -302,11 +337,12 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             run_folder.prepare(scene["name"], resume=False, overwrite=overwrite)
             run_folder.write_bytes("scene.json", scene.to_json().encode())
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
-        with Simulation(scene, backend, id_order=True, **options) as sim:
-            sim.read()  # (every rank: the start's energy, the bound of the later checks)
+        cuts, keep = share(scene, comm.Get_size(), comm.Get_rank(), buffer_dtype("particle_x", scene["physics.precision"]))
+        with Simulation(scene, backend, id_order=True, keep=keep, **options) as sim:
+            rank = Rank(sim, comm, cuts)
+            rank.gather()  # (rank 0: the start's state read, checked, its energy the bound of the later checks)
             if root:
-                run_folder.savez(CHECKPOINT, **sim.checkpoint())
-            rank = Rank(sim, comm)
+                run_folder.savez(CHECKPOINT, **rank.checkpoint)
 
             def snapshot():
                 rank.write_piece(series if root else None, out_dir, sim.step_count, sim.time)

@@ -89,21 +89,24 @@ class Simulation:
     _closed = False
     _user = None  # (thread name, method) of the call inside the simulation now (_exclusive)
 
-    def __init__(self, scene, backend="numba", *, poll=None, id_order=False, **backend_options):
+    def __init__(self, scene, backend="numba", *, poll=None, id_order=False, keep=None, **backend_options):
         """`poll()` is called between the start-up's stages (after each kernel is compiled): a safe
         point where sphcore.run stops on a signal. `id_order`: the grid orders each cell's particles by id,
-        not by their previous index (ID_ORDER: a rank of sphcore.parallel, whose rows change every step). The host memory the run will need is checked
+        not by their previous index (ID_ORDER: a rank of sphcore.parallel, whose rows change every step).
+        `keep`: a mask over the scene's particles (by id) of those this simulation holds, alone (a rank's share:
+        its own and its halo; ids stay the scene's). The host memory the run will need is checked
         first (sphcore.memory): a run that would not fit is refused before anything is allocated. The
         simulation keeps its own copy of `scene`, checked again (Scene.validated): a change made to the
         scene after it was loaded is checked, and one made later does not reach the run."""
         self._lock = threading.RLock()
         scene = scene.validated()
         check_options(backend, backend_options)
-        memory.check(scene, backend)  # Vulkan: its device memory is checked once the device is known
+        held = None if keep is None else int(np.count_nonzero(keep))
+        memory.check(scene, backend, n=held)  # Vulkan: its device memory is checked once the device is known
         poll = poll or (lambda: None)
         if backend == "vulkan":  # lavapipe's device memory is host memory
             backend_options.setdefault("before_allocating",
-                                       lambda ctx: memory.check(scene, backend, ctx.device_type == "CPU"))
+                                       lambda ctx: memory.check(scene, backend, ctx.device_type == "CPU", n=held))
         self.scene = scene
         # the fluid's particles, then the bodies' wall particles, body by body (fixed: ids fluid_count and up)
         x0 = scene.initial_positions()
@@ -114,6 +117,8 @@ class Simulation:
         self.buried = geometry.buried_keys(walls, scene["domain.box_min"], scene["domain.box_max"],
                                            scene["fluid.spacing"])  # (health.check_bodies)
         x0 = np.concatenate([x0, walls]).astype(x0.dtype)
+        ids = np.arange(len(x0)) if keep is None else np.flatnonzero(keep)
+        x0 = x0[ids] if keep is not None else x0
         self.n, self.dim = len(x0), scene.dim
         self.params = scene.params(self.n, self.fluid_count)
         self.spec = scene.spec_for(backend)._replace(ID_ORDER=id_order)  # (the state equation's lists: spec_for)
@@ -126,9 +131,10 @@ class Simulation:
                             self.spec.MAX_NEIGHBOURS, self.spec.GRADIENTS, gauge_table)
         self.gauges = None if gauge_table is None else gauges.GaugeReader(scene, gauge_table[1])
         self.gauge_rows = []  # the samples read from the device and not yet taken (take_gauge_rows)
+        state["particle_id"][:] = ids
         state["particle_x"][:, :self.dim] = x0
         state["particle_rho"][:] = scene.initial_density(x0)  # the state's density where it is integrated (continuity)
-        state["particle_rho"][self.fluid_count:] = scene["fluid.rest_density"]  # (wall_pressure sets the walls')
+        state["particle_rho"][ids >= self.fluid_count] = scene["fluid.rest_density"]  # (wall_pressure sets the walls')
         self.solver = solver_for(scene)  # what the pressure solver adds to the step (sphcore.solvers)
         self.solver.init_state(state)
         self.stages = plan(scene)

@@ -218,7 +218,7 @@ def test_one_rank_is_bitwise_a_simulation_in_id_order():
     from sphcore import parallel
     scene = sphcore.Scene.from_dict(small_dam_break())
     with sphcore.Simulation(scene, id_order=True) as plain, sphcore.Simulation(scene, id_order=True) as driven:
-        rank = parallel.Rank(driven, MPI.COMM_SELF)
+        rank = parallel.Rank(driven, MPI.COMM_SELF, parallel.share(scene, 1, 0)[0])
         for _ in range(30):
             plain.step()
             rank.step()
