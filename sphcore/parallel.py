@@ -7,8 +7,9 @@ orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell ru
 a rank holds them in. A step:
   [1] the cuts: each rank's owned particles per cell layer (from the rows the last sort gave each layer), summed
       over the ranks (Allreduce, their total checked) and balanced, each cut moved a layer at most;
-  [2] the owned rows near a cut read back (positions first); to every other rank those it owns now (migration)
-      or must see (halo), in one alltoall through host memory;
+  [2] the owned rows near a cut read back (positions first); to every other rank those it owns now (migration:
+      every buffer of a particle) or must see (halo: the buffers a step reads of a neighbour, HALO), through host
+      memory (mpi4py's Alltoallv of records: nothing pickled);
   [3] the received ones written over the old halo's rows;
   [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
@@ -35,7 +36,7 @@ from sphcore import decomposition, folder
 from sphcore.checkpoint import CHECKPOINT
 from sphcore.errors import SceneError, SimulationError
 from sphcore.output import SnapshotSeries, write_vtp
-from sphcore.plan import buffer_dtype
+from sphcore.plan import BUFFERS, buffer_dtype
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.stepper import LOADED, Simulation
 from sphcore.vk_runner import Context
@@ -102,8 +103,15 @@ def in_id_order(parts):
     return take(whole, np.argsort(whole["particle_id"], kind="stable"))
 
 
+# What a halo particle sends (a migrant, one the receiver owns now, sends every LOADED buffer): what a step reads
+# of a neighbour before writing it. compute_density and compute_forces read a neighbour's position, velocity,
+# density (state with continuity) and id (the bodies' wall particles), and its pressure, which compute_density
+# writes for every row first; a row's acceleration (compute_forces writes it), Verlet's particle_vh and DFSPH's
+# particle_kappa are read by that row's own stages only (integrate: a halo row's result is not kept).
+HALO = ("particle_x", "particle_v", "particle_rho", "particle_id")
+
 # The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the edges'
-# positions read back and the halo picked, its rows read back, the alltoall, the rows written), the stages, the dt.
+# positions read back and the halo picked, its rows read back, the Alltoall(v)s, the rows written), the stages, the dt.
 PARTS = ("exchange", "counts", "edges", "rows", "alltoall", "write", "stages", "dt")
 
 
@@ -224,11 +232,12 @@ class Rank:
     def exchange(self):
         """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
         checked: none lost, none twice) and the new cuts, each moved a layer at most; the positions of the owned
-        rows within `edge` layers of a cut read back, and of those the rows each other rank owns now or needs as
-        halo (read whole) sent to it (one alltoall); the received ones replace the old halo. The owned rows stay
-        where they are: one that another rank owns now and this one no longer sees stays a step, farther than
-        the halo's width from every particle this rank owns (its halo rows are replaced at the next step); the
-        sort puts every cell in id order whatever the rows (ID_ORDER)."""
+        rows within `edge` layers of a cut read back, and of those the rows each other rank owns now (migrants:
+        every LOADED buffer's row) or needs as halo (the HALO buffers' rows) sent to it (Alltoallv, sent); the
+        received ones replace the old halo, the migrants first. The owned rows stay where they are: one that
+        another rank owns now and this one no longer sees stays a step, farther than the halo's width from every
+        particle this rank owns (its halo rows are replaced at the next step); the sort puts every cell in id
+        order whatever the rows (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
         from mpi4py import MPI
         r, backend, starts, start = self.rank, self.sim.backend, self.starts, time.perf_counter()
         lo, hi = self.cuts[r], self.cuts[r + 1]
@@ -241,37 +250,96 @@ class Rank:
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
         cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
         start = self.lap("counts", start)
-        # [2] the edges: the owned rows first .. a - 1 and b .. end - 1 (none below the first slab, above the last)
+        # [2] the edges: the owned rows first .. a - 1 and b .. end - 1 (none below the first slab, above the last),
+        # their positions read back; the rows of each edge each other rank owns now (migrants) or needs as halo
         a = starts[min(lo + self.edge, hi)] if r > 0 else first
         b = max(a, starts[max(hi - self.edge, lo)] if r < self.size - 1 else end)
-        rows = np.r_[first:a, b:end]
-        x = np.concatenate([backend.read_rows("particle_x", first, a),
-                            backend.read_rows("particle_x", b, end)])[:, self.axis]
-        owner = decomposition.owners(self.layers_of(x), cuts)
-        wanted = [self.needed_by(x, owner, cuts, q) & (q != r) for q in range(self.size)]
-        sent = rows[np.any(wanted, axis=0)]
-        spans = [(run[0], run[-1] + 1) for run in (sent[sent < a], sent[sent >= b]) if len(run)]
+        edges = [(s, e, backend.read_rows("particle_x", s, e)) for s, e in ((first, a), (b, end)) if e > s]
+        migrants, halo = [[] for _ in range(self.size)], [[] for _ in range(self.size)]
+        for s, _, x in edges:
+            z = x[:, self.axis]
+            owner = decomposition.owners(self.layers_of(z), cuts)
+            for q in self.reached(z, cuts):
+                migrants[q].append(s + np.flatnonzero(owner == q))
+                halo[q].append(s + np.flatnonzero(self.needed_by(z, owner, cuts, q) & (owner != q)))
         start = self.lap("edges", start)
-        whole = {name: np.concatenate([backend.read_rows(name, s, e) for s, e in spans] or [
-            backend.read_rows(name, 0, 0)]) for name in LOADED}
-        at = np.searchsorted(np.concatenate([np.arange(s, e) for s, e in spans] or [[]]), rows)
-        sends = [None if q == r else take(whole, at[wanted[q]]) for q in range(self.size)]
+        full, lean = self.packed(edges, migrants, LOADED), self.packed(edges, halo, HALO)
         start = self.lap("rows", start)
-        received = self.comm.alltoall(sends)
+        full, lean = self.swapped([(full, migrants), (lean, halo)])
         start = self.lap("alltoall", start)
-        new = joined([part for part in received if part is not None] or [take(whole, at[:0])])
-        # [3] the new halo in the rows of the old: below the owned rows, then after them
-        m, owned = len(new["particle_id"]), end - first
+        # [3] the new halo in the rows of the old: below the owned rows, then after them; the migrants first
+        m, owned = len(full) + len(lean), end - first
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
             moved = min(first - m, owned)
             backend.move_rows(end - moved, m, moved)
         self.cuts = cuts
         self.sim.resize(m + owned, self.owned_cells())
-        for name, values in new.items():
-            backend.write_rows(name, 0, values[:first])
-            if m > first:
-                backend.write_rows(name, end, values[first:])
+        for at, records in ((0, full), (len(full), lean)):
+            for name in records.dtype.names:
+                self.write_halo(name, at, records[name], first, end)
         self.lap("write", start)
+
+    def reached(self, z, cuts):
+        """The other ranks whose band (their slab and the halo's width either side: needed_by) meets the
+        coordinates `z` of some edge's rows, under `cuts`: the others own none of them and need none."""
+        low, high = float(z.min()), float(z.max())
+        bounds = self.box_min + np.asarray(cuts, np.float64) * self.cell_size
+        return [q for q in range(self.size) if q != self.rank
+                and (q == 0 or high >= bounds[q] - self.width)
+                and (q == self.size - 1 or low < bounds[q + 1] + self.width)]
+
+    def packed(self, edges, picked, names):
+        """The rows `picked` (per rank, a list of arrays of row numbers of the edges) of buffers `names` as one record
+        array, rank by rank: each buffer read back once over the span of the picked rows of each edge (the edge's
+        positions, `edges`' third item, as they are)."""
+        rows = np.concatenate([np.zeros(0, np.int64), *(run for runs in picked for run in runs)])
+        records = np.empty(len(rows), self.record(names))
+        for s, e, x in edges:
+            inside = (rows >= s) & (rows < e)
+            if not inside.any():
+                continue
+            at = rows[inside]
+            u, w = at.min(), at.max() + 1
+            for name in names:
+                values = x[u - s:w - s] if name == "particle_x" else self.sim.backend.read_rows(name, u, w)
+                records[name][inside] = values[at - u]
+        return records
+
+    def record(self, names):
+        """The numpy record of a row of buffers `names` (their dtypes at the scene's precision)."""
+        precision = self.sim.scene["physics.precision"]
+        return np.dtype([(name, buffer_dtype(name, precision), (BUFFERS[name][1],) if BUFFERS[name][1] > 1 else ())
+                         for name in names])
+
+    def swapped(self, groups):
+        """The records every rank sends this one, of each of `groups` sent, (records, picked): rank q's records, as
+        many as `picked` has rows for it, one rank's after the other's. Their counts first (one Alltoall), then
+        each group's bytes (Alltoallv: byte counts are 32-bit, so under 2 GiB from one rank to another)."""
+        from mpi4py import MPI
+        sent = np.array([[sum(map(len, picked[q])) for _, picked in groups] for q in range(self.size)], np.int64)
+        received = np.empty_like(sent)
+        self.comm.Alltoall(sent, received)
+        swapped = []
+        for k, (records, _) in enumerate(groups):
+            into = np.empty(received[:, k].sum(), records.dtype)
+            self.comm.Alltoallv(self.message(records, sent[:, k], MPI), self.message(into, received[:, k], MPI))
+            swapped.append(into)
+        return swapped
+
+    @staticmethod
+    def message(records, counts, MPI):
+        """An Alltoallv's buffer of `records`, `counts` of them for each rank in rank order, as bytes."""
+        counts = counts * records.dtype.itemsize
+        return [records.view(np.uint8), (counts, np.cumsum(counts) - counts), MPI.BYTE]
+
+    def write_halo(self, name, at, values, first, end):
+        """Write `values` as rows at.. of the new halo into buffer `name`: those of its first `first` rows below the
+        owned rows first .. end - 1, the others after them."""
+        below = min(max(first - at, 0), len(values))
+        if below:
+            self.sim.backend.write_rows(name, at, values[:below])
+        if below < len(values):
+            self.sim.backend.write_rows(name, end + at + below - first, values[below:])
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""
