@@ -283,10 +283,11 @@ class Rank:
         """The other ranks whose band (their slab and the halo's width either side: needed_by) meets the
         coordinates `z` of some edge's rows, under `cuts`: the others own none of them and need none."""
         low, high = float(z.min()), float(z.max())
-        bounds = self.box_min + np.asarray(cuts, np.float64) * self.cell_size
+        slabs = self.slabs
+        bounds = slabs.box_min + np.asarray(cuts, np.float64) * slabs.cell_size
         return [q for q in range(self.size) if q != self.rank
-                and (q == 0 or high >= bounds[q] - self.width)
-                and (q == self.size - 1 or low < bounds[q + 1] + self.width)]
+                and (q == 0 or high >= bounds[q] - slabs.width)
+                and (q == self.size - 1 or low < bounds[q + 1] + slabs.width)]
 
     def packed(self, edges, picked, names):
         """The rows `picked` (per rank, a list of arrays of row numbers of the edges) of buffers `names` as one record
