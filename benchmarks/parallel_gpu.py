@@ -43,12 +43,14 @@ def main():
     ap.add_argument("--backend", default="vulkan", choices=("vulkan", "numba"))
     ap.add_argument("--device", help="Vulkan device of every rank (default: the rank's own, rank_device)")
     ap.add_argument("--plain", action="store_true", help="1 rank: also time a plain Simulation of the scene")
+    ap.add_argument("--room", type=float, default=2.0, help="the box's length in blocks (1.6 keeps 200 M particles' grid "
+                    "under params.MAX_CELLS)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
     comm = MPI.COMM_WORLD
     size, rank_number = comm.Get_size(), comm.Get_rank()
     count = args.count * size if args.per_rank else args.count
-    scene, _ = make_case(count, dim=3, search="grid")
+    scene, _ = make_case(count, dim=3, search="grid", room=args.room)
     options = {}
     if args.backend == "vulkan":
         options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())

@@ -24,7 +24,7 @@ for scaling in ${SCALING:-strong weak}; do
         log="$OUT/${scaling}_${ranks}.log"
         timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
             -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
-            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
+            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
     done
 done

@@ -16,8 +16,23 @@ Wall images need nothing more: a particle's image across a wall is farther from 
 particle itself. The bodies' wall particles (Adami's wall_pressure, a third level) are not handled yet.
 """
 import math
+import os
 
 import numpy as np
+
+# Launchers' environment variables with the world's size (Open MPI; MPICH's Hydra and Intel MPI, srun with PMI).
+# Not SLURM_NTASKS: a job's every process sees it, one started without srun too.
+SIZE_VARIABLES = ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE")
+
+
+def launched_ranks():
+    """The ranks mpiexec started this process among (1 where it did not), read from the environment: the CLI
+    imports mpi4py only under mpiexec."""
+    for name in SIZE_VARIABLES:
+        if os.environ.get(name, "").isdigit():
+            return int(os.environ[name])
+    return 1
+
 
 DEPTH = 2  # neighbour levels one step reads: forces of owned particles <- densities of neighbours <- positions
 

@@ -25,7 +25,6 @@ Simulation orders a cell's particles by their previous index, not their id, so i
 few ulps away at first, then as far apart as a flow lets two runs drift.
 """
 import contextlib
-import os
 import sys
 import time
 from pathlib import Path
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from sphcore import decomposition, folder
+from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CHECKPOINT
 from sphcore.errors import SceneError, SimulationError
 from sphcore.output import SnapshotSeries, write_vtp
@@ -40,20 +40,6 @@ from sphcore.plan import BUFFERS, buffer_dtype
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.stepper import LOADED, Simulation
 from sphcore.vk_runner import Context
-
-# Launchers' environment variables with the world's size (Open MPI; MPICH's Hydra and Intel MPI, srun with PMI).
-# Not SLURM_NTASKS: a job's every process sees it, one started without srun too.
-SIZE_VARIABLES = ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE")
-
-
-def launched_ranks():
-    """The ranks mpiexec started this process among (1 where it did not), read from the environment: the CLI
-    imports mpi4py only under mpiexec."""
-    for name in SIZE_VARIABLES:
-        if os.environ.get(name, "").isdigit():
-            return int(os.environ[name])
-    return 1
-
 
 def world():
     """mpi4py's COMM_WORLD; SceneError naming the extra where mpi4py is missing."""

@@ -20,6 +20,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from sphcore import geometry
+from sphcore.decomposition import launched_ranks
 from sphcore.errors import SceneError  # noqa: F401 (sphcore.scene.SceneError)
 from sphcore.gauges import check_scene as check_gauge_places
 from sphcore.gauges import check_shape as check_gauges
@@ -254,7 +255,7 @@ SCHEMA = {
                   "interval [s] (docs/scenes.md: Gauges)", "gauges"),
 }
 
-MAX_PARTICLES = 50_000_000
+MAX_PARTICLES = 50_000_000  # a process holds at most this many (under mpiexec: a rank; in all, launched_ranks times it)
 # the keys a folded parameter comes from, first the one to change when it overflows float32
 _FOLDED_FROM = {
     "cohesion_coef": ("fluid.cohesion", "fluid.spacing", "fluid.smoothing_ratio"),
@@ -677,15 +678,16 @@ class Scene:
         count = sum(np.prod(self._lattice_shape(b)) for b in self["fluid.blocks"])
         if count == 0:
             raise SceneError(f"fluid.blocks: no particle fits at fluid.spacing = {self['fluid.spacing']:g} m")
-        if count > MAX_PARTICLES:
+        most = MAX_PARTICLES * launched_ranks()
+        if count > most:
             raise SceneError(f"fluid.blocks: {count} particles at fluid.spacing = {self['fluid.spacing']:g} m "
-                             f"exceeds {MAX_PARTICLES}; raise the spacing")
+                             f"exceeds {most}{f' ({MAX_PARTICLES} a rank)' if most > MAX_PARTICLES else ''}; raise the spacing")
         if self["bodies"]:
             self._check_bodies()
             count = self.particle_count()
-            if count > MAX_PARTICLES:
+            if count > most:
                 raise SceneError(f"fluid.blocks and bodies: {count} particles (fluid and wall) at fluid.spacing = "
-                                 f"{self['fluid.spacing']:g} m exceeds {MAX_PARTICLES}; raise the spacing")
+                                 f"{self['fluid.spacing']:g} m exceeds {most}; raise the spacing")
         cells = int(np.prod(self.grid_dim))
         if cells > MAX_CELLS:
             raise SceneError(f"domain: the neighbour grid would need {cells} cells of size {self.cell_size:g} m "
