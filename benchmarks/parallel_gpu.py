@@ -6,7 +6,7 @@ staged through host memory, takes of it. Run under mpiexec (benchmarks/parallel_
 
 The scene is steps_per_second.py's 3D dam break (Tait, h = 2 dx, fixed dt, a sort every step; its block's
 lattice: the count rounded up to a cube), cut in slabs along z. Rank r runs on its host's r-th GPU
-(parallel.rank_vulkan_device; --device overrides). After --warmup steps (shader builds, first recordings), --steps steps
+(parallel.rank_device; --device overrides). After --warmup steps (shader builds, first recordings), --steps steps
 are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the edges'
 positions and the halo's rows read back, the pickled alltoall, the new halo written: what crosses the host),
 stages (the plan on the device) and dt (the partials read back and their Allreduce; none at a fixed dt).
@@ -41,7 +41,7 @@ def main():
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--warmup", type=int, default=3)
     ap.add_argument("--backend", default="vulkan", choices=("vulkan", "numba"))
-    ap.add_argument("--device", help="Vulkan device of every rank (default: the rank's own, rank_vulkan_device)")
+    ap.add_argument("--device", help="Vulkan device of every rank (default: the rank's own, rank_device)")
     ap.add_argument("--plain", action="store_true", help="1 rank: also time a plain Simulation of the scene")
     ap.add_argument("--room", type=float, default=2.0, help="the box's length in blocks (1.6 keeps 200 M particles' grid "
                     "under params.MAX_CELLS)")
@@ -53,7 +53,7 @@ def main():
     scene, _ = make_case(count, dim=3, search="grid", room=args.room)
     options = {}
     if args.backend == "vulkan":
-        options["device"] = parallel.rank_vulkan_device(comm, args.device)
+        options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
     start = time.perf_counter()
     cuts, keep = parallel.share(scene, size, rank_number)
     with sphcore.Simulation(scene, args.backend, id_order=True, keep=keep, **options) as sim:

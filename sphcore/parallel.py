@@ -25,7 +25,6 @@ Simulation orders a cell's particles by their previous index, not their id, so i
 few ulps away at first, then as far apart as a flow lets two runs drift.
 """
 import contextlib
-import os
 import sys
 import time
 from pathlib import Path
@@ -72,24 +71,6 @@ def rank_device(local_rank):
         alike = [k for k, d in enumerate(vk.vkEnumeratePhysicalDevices(ctx.instance))
                  if ctx._type_name(vk.vkGetPhysicalDeviceProperties(d).deviceType) == ctx.device_type]
     return str(alike[local_rank % len(alike)])
-
-
-def rank_vulkan_device(comm, device=None):
-    """The Vulkan device (`device` option) of this rank: `device` where given; else, where NVIDIA's driver runs
-    (/proc/driver/nvidia/gpus) and CUDA_VISIBLE_DEVICES is not set, this process is shown its host rank's GPU alone
-    (CUDA_VISIBLE_DEVICES, which NVIDIA's Vulkan driver honours; set before any Vulkan instance): a process's
-    instance holds a context on every GPU it sees, and a rank's kernels on a GPU another rank's process also held a
-    context on ran 3 times slower (2 H200s, docs/parallel.md); else rank_device. Call it before any Context."""
-    from mpi4py import MPI
-    if device is not None:
-        return device
-    local = comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank()
-    gpus = Path("/proc/driver/nvidia/gpus")
-    count = len(list(gpus.iterdir())) if gpus.is_dir() else 0
-    if count and "CUDA_VISIBLE_DEVICES" not in os.environ:
-        os.environ["CUDA_VISIBLE_DEVICES"] = str(local % count)
-        return None
-    return rank_device(local)
 
 
 def take(particles, mask):
@@ -394,12 +375,14 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
     checkpoint at the start, every time.checkpoint_every steps and at the end, and final.npz, gathered on rank 0
     in particle-id order and written there into `out_dir` (a checkpoint resumes on one rank: sphcore.resume).
     Return the final arrays on rank 0, None on the others. On Vulkan each rank runs on `device` (an index or part
-    of a name), by default its host's rank-th GPU (rank_vulkan_device)."""
+    of a name), by default its host's rank-th GPU (rank_device)."""
     comm = comm or world()
     check(scene, backend)
     options = {"local_size": local_size}
     if backend == "vulkan":
-        options["device"] = rank_vulkan_device(comm, device)
+        from mpi4py import MPI
+        options["device"] = device if device is not None else rank_device(
+            comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
     scene, steps, out_dir = _run_arguments(scene, backend, steps, out_dir, progress, None, overwrite, options)
     root = comm.Get_rank() == 0
     schedule = Schedule(scene, steps)
