@@ -22,8 +22,11 @@ for scaling in ${SCALING:-strong weak}; do
         if [ "$scaling" = strong ]; then args="--count ${COUNT:-8388608}"; else args="--count ${PER_GPU:-2097152} --per-rank"; fi
         [ "$ranks" = 1 ] && [ "$scaling" = strong ] && args="$args --plain"
         log="$OUT/${scaling}_${ranks}.log"
+        # each rank sees its own GPU alone (NVIDIA's Vulkan driver honours CUDA_VISIBLE_DEVICES, set as the process
+        # starts): a rank's kernels ran 3 times slower on a GPU another rank's process also held a context on
         timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
             -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
+            bash -c 'CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$OMPI_COMM_WORLD_LOCAL_RANK} exec "$0" "$@"' \
             "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
     done
