@@ -170,8 +170,8 @@ def check(scene, backend="numba", device_in_host=None, n=None):
     needed, free, where = short
     n = particle_count(scene) if n is None else n
     fixed = estimate(scene, backend, device_in_host, n=0)[0]
-    per_particle = (estimate(scene, backend, device_in_host)[0] - fixed) / max(n, 1)
-    room = free - fixed - (needed - estimate(scene, backend, device_in_host)[0])
+    per_particle = (estimate(scene, backend, device_in_host, n)[0] - fixed) / max(n, 1)
+    room = free - fixed - (needed - estimate(scene, backend, device_in_host, n)[0])
     fit = int(room / per_particle) if room > 0 else 0
     on = f"{backend}, {scene['physics.precision']}" + (", device memory in host memory" if device_in_host else "")
     if fit > 0:

@@ -134,11 +134,6 @@ def share(scene, ranks, rank, precision=np.float32):
     return cuts, slabs.needed_by(coordinate, decomposition.owners(layer, cuts), cuts, rank)
 
 
-# The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the edges'
-# positions read back and the halo picked, its rows read back, the alltoall, the rows written), the stages, the dt.
-PARTS = ("exchange", "counts", "edges", "rows", "alltoall", "write", "stages", "dt")
-
-
 class Rank:
     """One rank's share of a scene over MPI communicator `comm`, held by `sim` (a Simulation made with id_order and
     keep: share's): the particles of its slab (owned) and of the others' near it (the halo) on its device between
@@ -179,7 +174,7 @@ class Rank:
 
     def step(self):
         """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
-        `seconds`: exchange ([1]-[3]: the cuts, the edges read back, the alltoall, the rows written), stages
+        `seconds`: exchange ([1]-[3]: the cuts, the edges read back, the Alltoallv, the rows written), stages
         ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         start = time.perf_counter()

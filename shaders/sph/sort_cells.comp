@@ -2,8 +2,9 @@
 // Order each cell's particles by their current index (insertion sort of the cell's run), so
 // the sorted order is (cell, index) whatever order the atomic slots were taken in: Vulkan and
 // numba produce the same permutation bit for bit. With ID_ORDER by their id: (cell, id), the
-// order whatever rows the particles are held in (sphcore.parallel: a rank's set changes every step). One invocation per cell; a cell holds about
-// (h / spacing)^dim particles, so the sort is short (quadratic only if all crowd one cell).
+// order whatever rows the particles are held in (sphcore.parallel: a rank's set changes every step).
+// One invocation per cell; a cell holds about (h / spacing)^dim particles, so the sort is short
+// (quadratic only if all crowd one cell).
 // Mirror: sphcore/sph/sort_cells.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
