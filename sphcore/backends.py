@@ -500,10 +500,14 @@ class VulkanBackend:
         self.ctx.vk.vkDeviceWaitIdle(self.ctx.device)
         grown = [name for name, shape in shapes.items()
                  if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
-        for name in grown:
-            old = self.buffers[name]
+        for name in grown:  # (zeroed first, as numba's: a row a rank writes in part, a halo's, holds no garbage
+            old = self.buffers[name]  # that the sort, which leaves some buffers in place, could hand an owned row)
             self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
                                                  name)
+            rec = self.ctx.record()
+            rec.fill(self.buffers[name])
+            self.ctx.submit(rec.end())
+            rec.free()
             kept = int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize
             if kept:
                 self.ctx._copy(old.buffer, self.buffers[name].buffer, [(0, 0, kept)])
