@@ -153,16 +153,10 @@ class Rank:
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
         held = sim.backend.read(LOADED)
-        owner = decomposition.owners(self.layers_of(held["particle_x"][:, self.axis]), self.cuts)
+        owner = decomposition.owners(self.slabs.layers_of(held["particle_x"][:, self.axis]), self.cuts)
         self.start_owned = take(held, owner == self.rank)  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         sim.resize(sim.n, self.owned_cells())
-
-    def layers_of(self, x):
-        return self.slabs.layers_of(x)
-
-    def needed_by(self, x, owner, cuts, rank):
-        return self.slabs.needed_by(x, owner, cuts, rank)
 
     def owned_cells(self):
         """The cells of this rank's slab (params.glsl: owned_first, owned_end)."""
@@ -239,10 +233,10 @@ class Rank:
         migrants, halo = [[] for _ in range(self.size)], [[] for _ in range(self.size)]
         for s, _, x in edges:
             z = x[:, self.axis]
-            owner = decomposition.owners(self.layers_of(z), cuts)
+            owner = decomposition.owners(self.slabs.layers_of(z), cuts)
             for q in self.reached(z, cuts):
                 migrants[q].append(s + np.flatnonzero(owner == q))
-                halo[q].append(s + np.flatnonzero(self.needed_by(z, owner, cuts, q) & (owner != q)))
+                halo[q].append(s + np.flatnonzero(self.slabs.needed_by(z, owner, cuts, q) & (owner != q)))
         start = self.lap("edges", start)
         full, lean = self.packed(edges, migrants, LOADED), self.packed(edges, halo, HALO)
         start = self.lap("rows", start)
