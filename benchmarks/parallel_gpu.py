@@ -7,8 +7,8 @@ staged through host memory, takes of it. Run under mpiexec (benchmarks/parallel_
 The scene is steps_per_second.py's 3D dam break (Tait, h = 2 dx, fixed dt, a sort every step; its block's
 lattice: the count rounded up to a cube), cut in slabs along z. Rank r runs on its host's r-th GPU
 (parallel.rank_device; --device overrides). After --warmup steps (shader builds, first recordings), --steps steps
-are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the edges'
-positions and the halo's rows read back, the pickled alltoall, the new halo written: what crosses the host),
+are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the halo's and the
+migrants' rows read back, the Alltoallv, the new halo written: what crosses the host),
 stages (the plan on the device) and dt (the partials read back and their Allreduce; none at a fixed dt).
 The step's time is the slowest rank's (they wait for each other in the alltoall). With --plain, rank 0 of a 1-rank
 run then times a plain Simulation of the same scene, as a run on one GPU is (the baseline the decomposed runs
@@ -31,7 +31,7 @@ from sphcore import parallel  # noqa: E402
 from steps_per_second import make_case  # noqa: E402
 
 PARTS = parallel.PARTS
-HOST = ("exchange",)  # the part that moves particles through host memory (the next five are its parts)
+HOST = ("exchange",)  # the part that moves particles through host memory (the next four are its parts)
 
 
 def main():

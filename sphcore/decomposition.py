@@ -62,11 +62,28 @@ def layers_of(coordinate, box_min, inv_cell, layers):
     return np.clip(layer, 0, layers - 1).astype(np.int64)
 
 
-def edge_layers(width, inv_cell):
-    """How many cell layers of its slab, next to a cut, a rank reads the positions of after a step: the halo's width,
-    a layer a particle may cross in a step (sphcore.parallel checks that none went farther) and one a cut may move
-    (balance's `most`). No particle deeper inside the slab leaves it or is in another rank's halo."""
-    return math.ceil(width * inv_cell) + 2
+def reach_layers(width, inv_cell):
+    """How many cell layers past a slab's cut hold the particles within `width` of it: every particle whose
+    coordinate lies less than `width` beyond a cut is in one of them."""
+    return math.floor(width * inv_cell) + 1
+
+
+def bands(cuts, next_cuts, rank, other, reach):
+    """The layers of rank `rank`'s slab (under `cuts`, whose particles the last sort put there) that rank `other`
+    needs for the next step, under `next_cuts`: (full, halo), full the range of layers (first, end) whose
+    particles `other` may own then, halo the two ranges below and above it of those it may see as halo (`reach`
+    layers of its slab past each cut: reach_layers). Each reaches a layer farther, the layer a particle may
+    cross in a step (sphcore.parallel checks that none went farther: none is lost); every range lies in the slab
+    (possibly empty)."""
+    lo, hi = cuts[rank], cuts[rank + 1]
+
+    def inside(first, end):
+        first, end = min(max(first, lo), hi), min(max(end, lo), hi)
+        return first, max(first, end)
+
+    full = inside(next_cuts[other] - 1, next_cuts[other + 1] + 1)
+    need = inside(next_cuts[other] - reach - 1, next_cuts[other + 1] + reach + 1)
+    return full, [(need[0], full[0]), (full[1], need[1])]
 
 
 def balance(layer_counts, ranks, previous=None, most=None):

@@ -7,9 +7,10 @@ orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell ru
 a rank holds them in. A step:
   [1] the cuts: each rank's owned particles per cell layer (from the rows the last sort gave each layer), summed
       over the ranks (Allreduce, their total checked) and balanced, each cut moved a layer at most;
-  [2] the owned rows near a cut read back (positions first); to every other rank those it owns now (migration:
-      every buffer of a particle) or must see (halo: the buffers a step reads of a neighbour, HALO), through host
-      memory (mpi4py's Alltoallv of records: nothing pickled);
+  [2] to every other rank, the owned rows of the cell layers near its slab: of those it may own at the next step
+      (migration: every buffer of a particle), of those it may see (halo: the buffers a step reads of a neighbour,
+      HALO) (decomposition.bands: whole layers, so runs of rows), read back in one copy and sent through host
+      memory (one Alltoallv of bytes: nothing pickled, nothing picked on the host);
   [3] the received ones written over the old halo's rows;
   [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
@@ -95,15 +96,16 @@ def in_id_order(parts):
 # writes for every row first; a row's acceleration (compute_forces writes it), Verlet's particle_vh and DFSPH's
 # particle_kappa are read by that row's own stages only (integrate: a halo row's result is not kept).
 HALO = ("particle_x", "particle_v", "particle_rho", "particle_id")
+RUNS = (LOADED, HALO, HALO)  # the buffers of the rows sent a rank: those it may own, those below and above them
 
-# The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the edges'
-# positions read back and the halo picked, its rows read back, the Alltoall(v)s, the rows written), the stages, the dt.
-PARTS = ("exchange", "counts", "edges", "rows", "alltoall", "write", "stages", "dt")
+# The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the rows read
+# back, the Alltoall(v), the rows written), the stages, the dt.
+PARTS = ("exchange", "counts", "rows", "alltoall", "write", "stages", "dt")
 
 
 class Slabs:
     """The slabs of a scene's grid (sphcore.decomposition, from the parameter block `params`): the axis, each
-    particle's layer as the device's grid finds it, the halo's width and the edges' depth."""
+    particle's layer as the device's grid finds it, the halo's width and the layers it reaches past a cut."""
 
     def __init__(self, scene, params):
         P = params[0]
@@ -113,7 +115,7 @@ class Slabs:
         self.layers = int(P["grid_dim"][self.axis])
         self.per_layer = int(np.prod(P["grid_dim"][:self.axis]))  # (cells.glsl: the layer is the slowest index)
         self.width = decomposition.halo_width(scene)
-        self.edge = decomposition.edge_layers(self.width, self.inv_cell)
+        self.reach = decomposition.reach_layers(self.width, self.inv_cell)
 
     def layers_of(self, x):
         return decomposition.layers_of(x, self.box_min, self.inv_cell, self.layers)
@@ -148,8 +150,11 @@ class Rank:
         self.adaptive = cut < len(names)
         self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
         self.slabs = Slabs(sim.scene, sim.params)
-        self.axis, self.layers, self.per_layer, self.edge = (self.slabs.axis, self.slabs.layers,
-                                                             self.slabs.per_layer, self.slabs.edge)
+        self.axis, self.layers, self.per_layer, self.reach = (self.slabs.axis, self.slabs.layers,
+                                                              self.slabs.per_layer, self.slabs.reach)
+        precision = sim.scene["physics.precision"]
+        self.row_bytes = {name: buffer_dtype(name, precision).itemsize * BUFFERS[name][1] for name in LOADED}
+        self.run_bytes = np.array([sum(self.row_bytes[name] for name in names) for names in RUNS])
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
         held = sim.backend.read(LOADED)
@@ -168,7 +173,7 @@ class Rank:
 
     def step(self):
         """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
-        `seconds`: exchange ([1]-[3]: the cuts, the edges read back, the Alltoallv, the rows written), stages
+        `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the rows written), stages
         ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         start = time.perf_counter()
@@ -206,13 +211,13 @@ class Rank:
 
     def exchange(self):
         """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
-        checked: none lost, none twice) and the new cuts, each moved a layer at most; the positions of the owned
-        rows within `edge` layers of a cut read back, and of those the rows each other rank owns now (migrants:
-        every LOADED buffer's row) or needs as halo (the HALO buffers' rows) sent to it (Alltoallv, sent); the
-        received ones replace the old halo, the migrants first. The owned rows stay where they are: one that
-        another rank owns now and this one no longer sees stays a step, farther than the halo's width from every
-        particle this rank owns (its halo rows are replaced at the next step); the sort puts every cell in id
-        order whatever the rows (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
+        checked: none lost, none twice) and the new cuts, each moved a layer at most; to each other rank the rows
+        of the layers of this one's slab it may own at the next step (every LOADED buffer) or see as halo (the
+        HALO buffers) (decomposition.bands: runs of rows, as the sort ordered the cells), read back in one copy
+        and sent in one Alltoallv; the received ones replace the old halo. The owned rows stay where they are:
+        one that another rank owns now stays a step, farther than the halo's width from every particle this rank
+        owns (its halo rows are replaced at the next step); the sort puts every cell in id order whatever the rows
+        (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
         from mpi4py import MPI
         r, backend, starts, start = self.rank, self.sim.backend, self.starts, time.perf_counter()
         lo, hi = self.cuts[r], self.cuts[r + 1]
@@ -225,97 +230,42 @@ class Rank:
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
         cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
         start = self.lap("counts", start)
-        # [2] the edges: the owned rows first .. a - 1 and b .. end - 1 (none below the first slab, above the last),
-        # their positions read back; the rows of each edge each other rank owns now (migrants) or needs as halo
-        a = starts[min(lo + self.edge, hi)] if r > 0 else first
-        b = max(a, starts[max(hi - self.edge, lo)] if r < self.size - 1 else end)
-        edges = [(s, e, backend.read_rows("particle_x", s, e)) for s, e in ((first, a), (b, end)) if e > s]
-        migrants, halo = [[] for _ in range(self.size)], [[] for _ in range(self.size)]
-        for s, _, x in edges:
-            z = x[:, self.axis]
-            owner = decomposition.owners(self.slabs.layers_of(z), cuts)
-            for q in self.reached(z, cuts):
-                migrants[q].append(s + np.flatnonzero(owner == q))
-                halo[q].append(s + np.flatnonzero(self.slabs.needed_by(z, owner, cuts, q) & (owner != q)))
-        start = self.lap("edges", start)
-        full, lean = self.packed(edges, migrants, LOADED), self.packed(edges, halo, HALO)
+        # [2] each other rank's runs of rows: (names, first row, end row), read back one after the other
+        runs = [[] if q == r else self.runs(cuts, q) for q in range(self.size)]
+        sent = backend.read_regions([(name, a, b) for q_runs in runs for names, a, b in q_runs for name in names])
         start = self.lap("rows", start)
-        full, lean = self.swapped([(full, migrants), (lean, halo)])
+        rows = np.array([[b - a for _, a, b in q_runs] or [0] * len(RUNS) for q_runs in runs], np.int64)
+        received_rows = np.empty_like(rows)
+        self.comm.Alltoall(rows, received_rows)
+        send_bytes, receive_bytes = (rows @ self.run_bytes, received_rows @ self.run_bytes)
+        received = np.empty(receive_bytes.sum(), np.uint8)
+        self.comm.Alltoallv([sent, (send_bytes, np.cumsum(send_bytes) - send_bytes), MPI.BYTE],
+                            [received, (receive_bytes, np.cumsum(receive_bytes) - receive_bytes), MPI.BYTE])
         start = self.lap("alltoall", start)
-        # [3] the new halo in the rows of the old: below the owned rows, then after them; the migrants first
-        m, owned = len(full) + len(lean), end - first
+        # [3] the new halo in the rows of the old: below the owned rows, then after them
+        m, owned = int(received_rows.sum()), end - first
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
             moved = min(first - m, owned)
             backend.move_rows(end - moved, m, moved)
         self.cuts = cuts
         self.sim.resize(m + owned, self.owned_cells())
-        for at, records in ((0, full), (len(full), lean)):
-            for name in records.dtype.names:
-                self.write_halo(name, at, records[name], first, end)
+        regions, at, offset = [], 0, 0
+        for count, names in zip(received_rows.reshape(-1), RUNS * self.size):
+            for name in names:
+                below = min(max(first - at, 0), count)  # (rows of the halo below the owned ones; the rest after)
+                size = self.row_bytes[name]
+                regions += [(name, at, offset, below), (name, end + at + below - first, offset + below * size,
+                                                        count - below)]
+                offset += count * size
+            at += count
+        backend.write_regions(received, regions)
         self.lap("write", start)
 
-    def reached(self, z, cuts):
-        """The other ranks whose band (their slab and the halo's width either side: needed_by) meets the
-        coordinates `z` of some edge's rows, under `cuts`: the others own none of them and need none."""
-        low, high = float(z.min()), float(z.max())
-        slabs = self.slabs
-        bounds = slabs.box_min + np.asarray(cuts, np.float64) * slabs.cell_size
-        return [q for q in range(self.size) if q != self.rank
-                and (q == 0 or high >= bounds[q] - slabs.width)
-                and (q == self.size - 1 or low < bounds[q + 1] + slabs.width)]
-
-    def packed(self, edges, picked, names):
-        """The rows `picked` (per rank, a list of arrays of row numbers of the edges) of buffers `names` as one record
-        array, rank by rank: each buffer read back once over the span of the picked rows of each edge (the edge's
-        positions, `edges`' third item, as they are)."""
-        rows = np.concatenate([np.zeros(0, np.int64), *(run for runs in picked for run in runs)])
-        records = np.empty(len(rows), self.record(names))
-        for s, e, x in edges:
-            inside = (rows >= s) & (rows < e)
-            if not inside.any():
-                continue
-            at = rows[inside]
-            u, w = at.min(), at.max() + 1
-            for name in names:
-                values = x[u - s:w - s] if name == "particle_x" else self.sim.backend.read_rows(name, u, w)
-                records[name][inside] = values[at - u]
-        return records
-
-    def record(self, names):
-        """The numpy record of a row of buffers `names` (their dtypes at the scene's precision)."""
-        precision = self.sim.scene["physics.precision"]
-        return np.dtype([(name, buffer_dtype(name, precision), (BUFFERS[name][1],) if BUFFERS[name][1] > 1 else ())
-                         for name in names])
-
-    def swapped(self, groups):
-        """The records every rank sends this one, of each of `groups` sent, (records, picked): rank q's records, as
-        many as `picked` has rows for it, one rank's after the other's. Their counts first (one Alltoall), then
-        each group's bytes (Alltoallv: byte counts are 32-bit, so under 2 GiB from one rank to another)."""
-        from mpi4py import MPI
-        sent = np.array([[sum(map(len, picked[q])) for _, picked in groups] for q in range(self.size)], np.int64)
-        received = np.empty_like(sent)
-        self.comm.Alltoall(sent, received)
-        swapped = []
-        for k, (records, _) in enumerate(groups):
-            into = np.empty(received[:, k].sum(), records.dtype)
-            self.comm.Alltoallv(self.message(records, sent[:, k], MPI), self.message(into, received[:, k], MPI))
-            swapped.append(into)
-        return swapped
-
-    @staticmethod
-    def message(records, counts, MPI):
-        """An Alltoallv's buffer of `records`, `counts` of them for each rank in rank order, as bytes."""
-        counts = counts * records.dtype.itemsize
-        return [records.view(np.uint8), (counts, np.cumsum(counts) - counts), MPI.BYTE]
-
-    def write_halo(self, name, at, values, first, end):
-        """Write `values` as rows at.. of the new halo into buffer `name`: those of its first `first` rows below the
-        owned rows first .. end - 1, the others after them."""
-        below = min(max(first - at, 0), len(values))
-        if below:
-            self.sim.backend.write_rows(name, at, values[:below])
-        if below < len(values):
-            self.sim.backend.write_rows(name, end + at + below - first, values[below:])
+    def runs(self, cuts, q):
+        """The runs of rows this rank sends rank q for the next step, under the new `cuts`: (names, first row,
+        end row) of decomposition.bands' full range (LOADED) and halo ranges (HALO), as RUNS names them."""
+        full, halo = decomposition.bands(self.cuts, cuts, self.rank, q, self.reach)
+        return [(names, self.starts[a], self.starts[b]) for names, (a, b) in zip(RUNS, [full, *halo])]
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""

@@ -66,6 +66,40 @@ def test_each_particle_owned_once_and_the_halo_covers_two_reaches():
         assert not held[(owner != r) & (d > 2 * h + 2 * cell_size)].any()  # (no more than the slab's band)
 
 
+def test_bands_hold_what_each_rank_owns_or_sees_after_a_step():
+    """Brute force over random clouds: a particle of rank r's slab (layer by the last sort) that moves at most a
+    cell layer is sent to every rank q that owns it under the next cuts in q's full band, and to every q within the
+    halo width of whose next slab it lies in one of the bands."""
+    rng = np.random.default_rng(11)
+    box_min, cell_size, layers = 0.0, 0.05, 24
+    for ranks, width in ((2, 0.101), (3, 0.101), (4, 0.05), (5, 0.23)):
+        reach = decomposition.reach_layers(width, 1 / cell_size)
+        z0 = rng.uniform(0.0, layers * cell_size, 3000)
+        z1 = np.clip(z0 + rng.uniform(-0.999, 0.999, len(z0)) * cell_size, 0.0, layers * cell_size - 1e-9)
+        layer0 = decomposition.layers_of(z0, box_min, 1 / cell_size, layers)
+        layer1 = decomposition.layers_of(z1, box_min, 1 / cell_size, layers)
+        cuts = decomposition.balance(np.bincount(layer0, minlength=layers), ranks)
+        nudged = np.clip(cuts + rng.integers(-1, 2, len(cuts)), 0, layers)
+        nudged[0], nudged[-1] = 0, layers
+        following = decomposition.balance(np.bincount(layer1, minlength=layers), ranks, previous=cuts, most=1)
+        for next_cuts in (following, np.maximum.accumulate(nudged)):
+            if (np.diff(next_cuts) < 1).any():
+                continue
+            owner0, owner1 = decomposition.owners(layer0, cuts), decomposition.owners(layer1, next_cuts)
+            for r in range(ranks):
+                for q in range(ranks):
+                    if q == r:
+                        continue
+                    (a, b), halo = decomposition.bands(cuts, next_cuts, r, q, reach)
+                    full = (layer0 >= a) & (layer0 < b)
+                    sent = full | np.any([(layer0 >= c) & (layer0 < d) for c, d in halo], axis=0)
+                    mine = owner0 == r
+                    assert (full | ~mine)[owner1 == q].all()
+                    seen = decomposition.needed_by(z1, owner1, next_cuts, box_min, cell_size, width, q)
+                    assert (sent | ~mine)[seen].all()
+                    assert not (sent & ~mine).any() and b - a <= next_cuts[q + 1] - next_cuts[q] + 2
+
+
 def small_dam_break(steps=200, **extra):
     """dam_break_2d at 0.02 m: 300 particles, the engineering model (continuity, Verlet, adaptive dt)."""
     return {"name": "dam_break_2d_mpi", "physics": {"model": "engineering", **extra},
@@ -179,7 +213,8 @@ def test_load_on_numba_reuses_its_arrays():
 
 @pytest.mark.vulkan
 def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
-    """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_entries): a resize keeps
+    """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_entries, read_regions,
+    write_regions): a resize keeps
     the first rows, grown past the buffers too (Vulkan copies them into the new ones); a move copies a run of every
     per-particle buffer; both backends hold the same bits after each, and step them alike."""
     from conftest import vulkan_or_skip
@@ -207,6 +242,21 @@ def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
             assert np.array_equal(gpu.backend.read_rows(name, 0, 400), cpu.backend.read_rows(name, 0, 400)), name
         cells = np.arange(0, gpu.params[0]["cell_total"], 7)
         assert np.array_equal(gpu.backend.read_entries("cell_start", cells), cpu.backend.read_entries("cell_start", cells))
+        # runs of rows of several buffers read back as one block of bytes, and written from one
+        regions = [("particle_x", 5, 9), ("particle_id", 300, 400), ("particle_rho", 0, 0), ("particle_v", 390, 400)]
+        block = gpu.backend.read_regions(regions)
+        assert np.array_equal(block, cpu.backend.read_regions(regions))
+        assert np.array_equal(block[:64].view(np.float32).reshape(4, 4), cpu.backend.read_rows("particle_x", 5, 9))
+        ids = cpu.backend.read_rows("particle_id", 300, 400)
+        assert np.array_equal(block[64:464].view(np.uint32), ids)
+        written = [("particle_id", 0, 64, 100), ("particle_x", 200, 0, 2), ("particle_v", 398, 464, 2), ("particle_v", 0, 0, 0)]
+        for sim in (gpu, cpu):
+            sim.backend.write_regions(block, written)
+        for name in LOADED:
+            assert np.array_equal(gpu.backend.read_rows(name, 0, 400), cpu.backend.read_rows(name, 0, 400)), name
+        assert np.array_equal(cpu.backend.read_rows("particle_id", 0, 100), ids)
+        assert np.array_equal(cpu.backend.read_rows("particle_x", 200, 202), block[:32].view(np.float32).reshape(2, 4))
+        assert np.array_equal(cpu.backend.read_rows("particle_v", 398, 400), block[464:496].view(np.float32).reshape(2, 4))
 
 
 def test_one_rank_is_bitwise_a_simulation_in_id_order():

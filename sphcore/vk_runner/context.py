@@ -589,7 +589,42 @@ class Context:
         self.submit(rec.end())
         rec.free()
 
+    def _copies(self, copies):
+        """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait."""
+        rec = Recording(self)
+        for src, dst, regions in copies:
+            self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, len(regions),
+                                    [self.vk.VkBufferCopy(srcOffset=a, dstOffset=b, size=n) for a, b, n in regions])
+        self.submit(rec.end())
+        rec.free()
+
     # ---- public ----
+    def read_regions(self, copies, nbytes):
+        """`nbytes` bytes (uint8) read back from buffers in one submission: for each (Buffer, its byte offset,
+        the byte offset in the result, byte count) of `copies`."""
+        if nbytes == 0:
+            return np.zeros(0, np.uint8)
+        staging = self._staging(nbytes)
+        self._copies([(buffer.buffer, staging.buffer, [(offset, at, count)])
+                      for buffer, offset, at, count in copies if count])
+        out = self._read_mapped(staging.memory, nbytes)
+        self._release(staging)
+        return out
+
+    def write_regions(self, data, copies):
+        """Write bytes of `data` (uint8) into buffers in one submission: for each (Buffer, the byte offset in
+        `data`, the buffer's byte offset, byte count) of `copies`."""
+        copies = [c for c in copies if c[3]]
+        if not copies:
+            return
+        for buffer, _, offset, count in copies:
+            if offset + count > buffer.nbytes:
+                raise ValueError(f"{buffer.name}: {count} bytes at {offset} do not fit in {buffer.nbytes}")
+        staging = self._staging(data.nbytes)
+        self._write_mapped(staging.memory, np.ascontiguousarray(data))
+        self._copies([(staging.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies])
+        self._release(staging)
+
     def buffer(self, nbytes, name="buffer", uniform=False):
         return Buffer(self, nbytes, name, uniform)
 
