@@ -7,7 +7,7 @@
 # Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
 # with the ignored folders .gl and .whl carried (benchmarks/gpu_env.sh); .whl must hold a cp312 mpi4py wheel.
-# A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
+# $WARMUP steps (default 3) come before the timed ones. A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
 set -u -o pipefail
 OUT=${OUT:-benchmarks/results/parallel_gpu}
 . benchmarks/gpu_env.sh
@@ -29,7 +29,7 @@ for scaling in ${SCALING:-strong weak}; do
         timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
             -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
             bash -c 'CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$OMPI_COMM_WORLD_LOCAL_RANK} exec "$0" "$@"' \
-            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
+            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --warmup "${WARMUP:-3}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
         kill $clocks
     done

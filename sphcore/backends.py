@@ -213,6 +213,10 @@ class NumbaBackend:
         parts = [self.state[name][start:stop].view(np.uint8).reshape(-1) for name, start, stop in regions]
         return np.concatenate([np.zeros(0, np.uint8), *parts])
 
+    def space_to_write(self, nbytes):
+        """An array of `nbytes` (uint8) to fill with write_regions' `data`."""
+        return np.empty(nbytes, np.uint8)
+
     def write_regions(self, data, regions):
         """Set rows of buffers to bytes of `data` (uint8): for each (name, row, offset, count) of `regions`,
         `count` rows from `row` on to the bytes from `offset` on."""
@@ -577,13 +581,18 @@ class VulkanBackend:
 
     def read_regions(self, regions):
         """The bytes of rows start .. stop - 1 of buffer `name`, for each (name, start, stop) of `regions`, one
-        region's after the other's (one uint8 array), in one submission."""
+        region's after the other's (one uint8 array), in one submission: a view of host memory that the next
+        read_regions overwrites."""
         copies, at = [], 0
         for name, start, stop in regions:
             size = self._row_bytes(name)
             copies.append((self.buffers[name], start * size, at, (stop - start) * size))
             at += (stop - start) * size
         return self.ctx.read_regions(copies, at)
+
+    def space_to_write(self, nbytes):
+        """Host memory of `nbytes` (uint8) to fill with write_regions' `data`, which then is not copied again."""
+        return self.ctx.space_to_write(nbytes)
 
     def write_regions(self, data, regions):
         """Set rows of buffers to bytes of `data` (uint8): for each (name, row, offset, count) of `regions`,

@@ -238,7 +238,7 @@ class Rank:
         received_rows = np.empty_like(rows)
         self.comm.Alltoall(rows, received_rows)
         send_bytes, receive_bytes = (rows @ self.run_bytes, received_rows @ self.run_bytes)
-        received = np.empty(receive_bytes.sum(), np.uint8)
+        received = backend.space_to_write(int(receive_bytes.sum()))
         self.comm.Alltoallv([sent, (send_bytes, np.cumsum(send_bytes) - send_bytes), MPI.BYTE],
                             [received, (receive_bytes, np.cumsum(receive_bytes) - receive_bytes), MPI.BYTE])
         start = self.lap("alltoall", start)

@@ -4,6 +4,7 @@ Pitfalls of the `vulkan` package handled here: VK_WHOLE_SIZE is -1 there, so the
 64-bit value is passed; pData/pValues take cdata from ffi.from_buffer; create functions
 return cdata arrays ([0]); a mapped pointer is copied out before vkUnmapMemory.
 """
+import math
 import os
 import sys
 
@@ -74,7 +75,7 @@ class Buffer:
             self.ctx._write_mapped(self.memory, data, offset)
         else:
             staging = self.ctx._staging(data.nbytes)
-            self.ctx._write_mapped(staging.memory, data)
+            staging.bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
             self.ctx._copy(staging.buffer, self.buffer, [(0, offset, data.nbytes)])
             self.ctx._release(staging)
 
@@ -100,7 +101,7 @@ class Buffer:
         ends = np.cumsum([0] + [count for _, count in regions]).tolist()
         self.ctx._copy(self.buffer, staging.buffer, [(offset, end, count)
                                                      for (offset, count), end in zip(regions, ends)])
-        out = self.ctx._read_mapped(staging.memory, nbytes).view(dtype)
+        out = staging.bytes[:nbytes].copy().view(dtype)
         self.ctx._release(staging)
         return out
 
@@ -119,6 +120,8 @@ class Buffer:
 
 
 class _Staging(Buffer):
+    """Host-visible memory for copies, mapped while it lives: `bytes` views it (uint8)."""
+
     def __init__(self, ctx, nbytes):
         vk = ctx.vk
         self.ctx, self.nbytes, self.name = ctx, nbytes, "staging"
@@ -128,6 +131,13 @@ class _Staging(Buffer):
         # at a fraction of the speed)
         self.buffer, self.memory, self.host_visible = ctx._allocate(nbytes, usage, flags, "staging",
                                                                     flags | vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT)
+        self.bytes = np.frombuffer(ctx._map(self.memory, nbytes), np.uint8, nbytes)
+
+    def free(self):
+        if self.buffer is not None:
+            self.bytes = None  # (the view dies before its memory is unmapped)
+            self.ctx.vk.vkUnmapMemory(self.ctx.device, self.memory)
+        super().free()
 
 
 class Pipeline:
@@ -418,7 +428,7 @@ class Context:
             flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT), None)
         self.fence = vk.vkCreateFence(self.device, vk.VkFenceCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None)
-        self._kept_staging = None  # (_staging)
+        self._kept_staging = {}  # (_staging: a buffer kept for each use)
 
     # ---- instance and device ----
     def _create_instance(self, validation):
@@ -565,20 +575,22 @@ class Context:
         vk.vkUnmapMemory(self.device, memory)
         return out
 
-    def _staging(self, nbytes):
-        """Host-visible memory for a copy of `nbytes`: one buffer kept for every copy up to STAGING_MOST bytes,
-        grown to the largest so far (allocating memory took about 2 ms a copy on an NVIDIA driver; the DFSPH host
-        reads its control words after every submission, a rank of sphcore.parallel its halo every step)."""
-        if nbytes > STAGING_MOST:
+    def _staging(self, nbytes, use="copy", most=STAGING_MOST):
+        """Host-visible memory for a copy of `nbytes`: one buffer kept for each `use` (copies, the rows read
+        back and written by read_regions and write_regions) for every copy up to `most` bytes, grown to the
+        largest so far (allocating memory took about 2 ms a copy on an NVIDIA driver; the DFSPH host reads its
+        control words after every submission, a rank of sphcore.parallel its halo every step)."""
+        if nbytes > most:
             return _Staging(self, nbytes)
-        if self._kept_staging is None or self._kept_staging.nbytes < nbytes:
-            if self._kept_staging is not None:
-                self._kept_staging.free()
-            self._kept_staging = _Staging(self, max(nbytes, STAGING_KEPT))
-        return self._kept_staging
+        kept = self._kept_staging.get(use)
+        if kept is None or kept.nbytes < nbytes:
+            if kept is not None:
+                kept.free()
+            kept = self._kept_staging[use] = _Staging(self, max(nbytes, STAGING_KEPT))
+        return kept
 
     def _release(self, staging):
-        if staging is not self._kept_staging:
+        if staging not in self._kept_staging.values():
             staging.free()
 
     def _copy(self, src, dst, regions):
@@ -600,30 +612,31 @@ class Context:
 
     # ---- public ----
     def read_regions(self, copies, nbytes):
-        """`nbytes` bytes (uint8) read back from buffers in one submission: for each (Buffer, its byte offset,
-        the byte offset in the result, byte count) of `copies`."""
-        if nbytes == 0:
-            return np.zeros(0, np.uint8)
-        staging = self._staging(nbytes)
+        """`nbytes` bytes (uint8) read back from buffers in one submission, for each (Buffer, its byte offset, the
+        byte offset in the result, byte count) of `copies`: a view of host memory that the next read_regions
+        overwrites (copy what is kept longer)."""
+        staging = self._staging(nbytes, "read_regions", math.inf)
         self._copies([(buffer.buffer, staging.buffer, [(offset, at, count)])
                       for buffer, offset, at, count in copies if count])
-        out = self._read_mapped(staging.memory, nbytes)
-        self._release(staging)
-        return out
+        return staging.bytes[:nbytes]
+
+    def space_to_write(self, nbytes):
+        """Host memory of `nbytes` (uint8) for write_regions' `data`: filled there, it is not copied again."""
+        return self._staging(nbytes, "write_regions", math.inf).bytes[:nbytes]
 
     def write_regions(self, data, copies):
-        """Write bytes of `data` (uint8) into buffers in one submission: for each (Buffer, the byte offset in
-        `data`, the buffer's byte offset, byte count) of `copies`."""
+        """Write bytes of `data` (uint8; best in space_to_write's memory) into buffers in one submission: for each
+        (Buffer, the byte offset in `data`, the buffer's byte offset, byte count) of `copies`."""
         copies = [c for c in copies if c[3]]
         if not copies:
             return
         for buffer, _, offset, count in copies:
             if offset + count > buffer.nbytes:
                 raise ValueError(f"{buffer.name}: {count} bytes at {offset} do not fit in {buffer.nbytes}")
-        staging = self._staging(data.nbytes)
-        self._write_mapped(staging.memory, np.ascontiguousarray(data))
+        staging = self._staging(data.nbytes, "write_regions", math.inf)
+        if not (len(data) and data.ctypes.data == staging.bytes.ctypes.data):
+            staging.bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
         self._copies([(staging.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies])
-        self._release(staging)
 
     def buffer(self, nbytes, name="buffer", uniform=False):
         return Buffer(self, nbytes, name, uniform)
@@ -667,8 +680,8 @@ class Context:
             vk.vkDeviceWaitIdle(self.device)
         except vk.VkErrorDeviceLost:
             pass  # nothing runs on a lost device any more; its objects are destroyed all the same
-        if self._kept_staging is not None:
-            self._kept_staging.free()
+        for staging in self._kept_staging.values():
+            staging.free()
         vk.vkDestroyFence(self.device, self.fence, None)
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
