@@ -7,7 +7,8 @@
 # Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
 # with the ignored folders .gl and .whl carried (benchmarks/gpu_env.sh); .whl must hold a cp312 mpi4py wheel.
-# $WARMUP steps (default 3) come before the timed ones. A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
+# $WARMUP steps (default 100) come before the timed ones: a GPU idle for a while (the setup) clocks down to 345 MHz
+# and, under a load that pauses for the exchange, takes seconds to clock up again (the <case>_gpus.csv files). A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
 set -u -o pipefail
 OUT=${OUT:-benchmarks/results/parallel_gpu}
 . benchmarks/gpu_env.sh
@@ -26,10 +27,14 @@ for scaling in ${SCALING:-strong weak}; do
         # starts): a rank's kernels ran 3 times slower on a GPU another rank's process also held a context on
         nvidia-smi --query-gpu=timestamp,index,clocks.sm,clocks.mem,utilization.gpu,power.draw --format=csv \
             -lms 200 > "$OUT/${scaling}_${ranks}_gpus.csv" & clocks=$!
+        # Open MPI copies a large message between two processes once (CMA) rather than twice through a shared
+        # segment: the GPU machines' environment turns that off (btl_vader_single_copy_mechanism=none); 42 MB each
+        # way between 2 ranks took 16 ms so, 10 ms with it
         timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
+            --mca btl_vader_single_copy_mechanism cma \
             -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
             bash -c 'CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$OMPI_COMM_WORLD_LOCAL_RANK} exec "$0" "$@"' \
-            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --warmup "${WARMUP:-3}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
+            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --warmup "${WARMUP:-100}" --room "${ROOM:-2}" --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
         kill $clocks
     done
