@@ -8,7 +8,8 @@
 # Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
 # with the ignored folders .gl and .whl carried (benchmarks/gpu_env.sh); .whl must hold a cp312 mpi4py wheel.
 # $WARMUP steps (default 100) come before the timed ones: a GPU idle for a while (the setup) clocks down to 345 MHz
-# and, under a load that pauses for the exchange, takes seconds to clock up again (the <case>_gpus.csv files). A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
+# and, under a load that pauses for the exchange, takes seconds to clock up again (the <case>_gpus.csv files).
+# A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
 set -u -o pipefail
 OUT=${OUT:-benchmarks/results/parallel_gpu}
 . benchmarks/gpu_env.sh
