@@ -90,13 +90,15 @@ def in_id_order(parts):
     return take(whole, np.argsort(whole["particle_id"], kind="stable"))
 
 
-# What a halo particle sends (a migrant, one the receiver owns now, sends every LOADED buffer): what a step reads
-# of a neighbour before writing it. compute_density and compute_forces read a neighbour's position, velocity,
-# density (state with continuity) and id (the bodies' wall particles), and its pressure, which compute_density
-# writes for every row first; a row's acceleration (compute_forces writes it), Verlet's particle_vh and DFSPH's
-# particle_kappa are read by that row's own stages only (integrate: a halo row's result is not kept).
+# What a halo particle sends: what a step reads of a neighbour before writing it. compute_density and compute_forces
+# read a neighbour's position, velocity, density (state with continuity) and id (the bodies' wall particles), and its
+# pressure, which compute_density writes for every row first; a row's acceleration (compute_forces writes it, the
+# sort's Verlet gather uses it as scratch), Verlet's particle_vh and DFSPH's particle_kappa are read by that row's
+# own stages only (integrate: a halo row's result is not kept). What a particle the receiver may own sends: every
+# LOADED buffer but those two a step writes before it reads them (60 of 80 bytes).
 HALO = ("particle_x", "particle_v", "particle_rho", "particle_id")
-RUNS = (LOADED, HALO, HALO)  # the buffers of the rows sent a rank: those it may own, those below and above them
+MIGRANT = tuple(name for name in LOADED if name not in ("particle_a", "particle_p"))
+RUNS = (MIGRANT, HALO, HALO)  # the buffers of the rows sent a rank: those it may own, those below and above them
 
 # The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the rows read
 # back, the Alltoall(v), the rows written), the stages, the dt.
@@ -212,7 +214,7 @@ class Rank:
     def exchange(self):
         """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
         checked: none lost, none twice) and the new cuts, each moved a layer at most; to each other rank the rows
-        of the layers of this one's slab it may own at the next step (every LOADED buffer) or see as halo (the
+        of the layers of this one's slab it may own at the next step (the MIGRANT buffers) or see as halo (the
         HALO buffers) (decomposition.bands: runs of rows, as the sort ordered the cells), read back in one copy
         and sent in one Alltoallv; the received ones replace the old halo. The owned rows stay where they are:
         one that another rank owns now stays a step, farther than the halo's width from every particle this rank
@@ -263,7 +265,7 @@ class Rank:
 
     def runs(self, cuts, q):
         """The runs of rows this rank sends rank q for the next step, under the new `cuts`: (names, first row,
-        end row) of decomposition.bands' full range (LOADED) and halo ranges (HALO), as RUNS names them."""
+        end row) of decomposition.bands' full range (MIGRANT) and halo ranges (HALO), as RUNS names them."""
         full, halo = decomposition.bands(self.cuts, cuts, self.rank, q, self.reach)
         return [(names, self.starts[a], self.starts[b]) for names, (a, b) in zip(RUNS, [full, *halo])]
 
