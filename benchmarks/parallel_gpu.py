@@ -70,9 +70,10 @@ def main():
             held += sim.n
         comm.Barrier()
         seconds = time.perf_counter() - start
+        rank.close()
         first, end = rank.owned_rows()
         row = {"rank": rank_number, "device": sim.device_name, "owned": int(end - first),
-               "held_mean": held / args.steps, **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
+               "held_mean": held / args.steps, "exchange": "shared memory" if rank.shared else "alltoallv", **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
         n = sim.fluid_count
     rows = comm.gather(row, root=0)
     if rank_number != 0:

@@ -207,11 +207,21 @@ class NumbaBackend:
         """Set a buffer's rows from `start` on to `values`."""
         self.state[name][start:start + len(values)] = values
 
-    def read_regions(self, regions):
+    def read_regions(self, regions, into=None):
         """The bytes of rows start .. stop - 1 of buffer `name`, for each (name, start, stop) of `regions`, one
-        region's after the other's (one uint8 array)."""
+        region's after the other's (one uint8 array; from the start of `into`, host_buffer's, where given)."""
         parts = [self.state[name][start:stop].view(np.uint8).reshape(-1) for name, start, stop in regions]
-        return np.concatenate([np.zeros(0, np.uint8), *parts])
+        if into is None:
+            return np.concatenate([np.zeros(0, np.uint8), *parts])
+        at = 0
+        for part in parts:
+            into[at:at + len(part)] = part
+            at += len(part)
+        return None
+
+    def host_buffer(self, memory):
+        """`memory` (uint8) as read_regions' `into` and write_regions' `data`: itself."""
+        return memory
 
     def space_to_write(self, nbytes):
         """An array of `nbytes` (uint8) to fill with write_regions' `data`."""
@@ -579,24 +589,30 @@ class VulkanBackend:
         self.buffers[name].write(array, start * self._row_bytes(name))
         self._known.pop(name, None)
 
-    def read_regions(self, regions):
+    def read_regions(self, regions, into=None):
         """The bytes of rows start .. stop - 1 of buffer `name`, for each (name, start, stop) of `regions`, one
-        region's after the other's (one uint8 array), in one submission: a view of host memory that the next
-        read_regions overwrites."""
+        region's after the other's, in one submission: from the start of `into` (host_buffer's) where given,
+        else as a view (uint8) of host memory that the next read_regions overwrites."""
         copies, at = [], 0
         for name, start, stop in regions:
             size = self._row_bytes(name)
             copies.append((self.buffers[name], start * size, at, (stop - start) * size))
             at += (stop - start) * size
-        return self.ctx.read_regions(copies, at)
+        return self.ctx.read_regions(copies, at, into)
+
+    def host_buffer(self, memory):
+        """`memory` (uint8, host memory of this process) as a buffer the device copies into and out of directly
+        (read_regions' `into`, write_regions' `data`); None where the device cannot (Context.host_buffer).
+        Free it (.free()) before the memory goes."""
+        return self.ctx.host_buffer(memory.ctypes.data, memory.nbytes)
 
     def space_to_write(self, nbytes):
         """Host memory of `nbytes` (uint8) to fill with write_regions' `data`, which then is not copied again."""
         return self.ctx.space_to_write(nbytes)
 
     def write_regions(self, data, regions):
-        """Set rows of buffers to bytes of `data` (uint8): for each (name, row, offset, count) of `regions`,
-        `count` rows from `row` on to the bytes from `offset` on; in one submission."""
+        """Set rows of buffers to bytes of `data` (uint8, or host_buffer's): for each (name, row, offset, count) of
+        `regions`, `count` rows from `row` on to the bytes from `offset` on; in one submission."""
         copies = []
         for name, row, offset, count in regions:
             size = self._row_bytes(name)

@@ -26,6 +26,7 @@ Simulation orders a cell's particles by their previous index, not their id, so i
 few ulps away at first, then as far apart as a flow lets two runs drift.
 """
 import contextlib
+import os
 import sys
 import time
 from pathlib import Path
@@ -138,6 +139,59 @@ def share(scene, ranks, rank, precision=np.float32):
     return cuts, slabs.needed_by(coordinate, decomposition.owners(layer, cuts), cuts, rank)
 
 
+class Shared:
+    """Memory the ranks of one host share (an MPI window, a part a rank), which each rank's device copies its rows
+    for the others into and the others' for it out of directly (backend.host_buffer: on Vulkan the device's
+    VK_EXT_external_memory_host, with no host copy and no message; numba copies its arrays). `make` gives one where
+    every rank is on one host and every device takes the memory, else None (then the rows go by Alltoallv; also
+    where SPHCORE_MPI_EXCHANGE=alltoallv)."""
+
+    GRAIN = 2 << 20  # a part's bytes are a multiple of this (and its address one of the page: Vulkan's import)
+
+    def __init__(self, comm, backend):
+        self.comm, self.backend, self.window, self.capacity, self.buffers = comm, backend, None, 0, []
+
+    @classmethod
+    def make(cls, comm, backend):
+        from mpi4py import MPI
+        if os.environ.get("SPHCORE_MPI_EXCHANGE") == "alltoallv" or \
+                comm.Split_type(MPI.COMM_TYPE_SHARED).Get_size() < comm.Get_size():
+            return None
+        shared = cls(comm, backend)
+        return shared if shared.fit(1) else None
+
+    def fit(self, nbytes):
+        """Room for `nbytes` in each rank's part (collective: every rank asks for the same), grown by a quarter
+        past it where there is less; whether every rank's device took every part (if not, none is kept)."""
+        from mpi4py import MPI
+        if nbytes <= self.capacity:
+            return True
+        self.close()
+        self.capacity = -(-int(nbytes * 1.25) // self.GRAIN) * self.GRAIN
+        info = MPI.Info.Create()
+        info.Set("alloc_shared_noncontig", "true")
+        self.window = MPI.Win.Allocate_shared(self.capacity, 1, info, comm=self.comm)
+        info.Free()
+        parts = [np.frombuffer(self.window.Shared_query(q)[0], np.uint8, self.capacity)
+                 for q in range(self.comm.Get_size())]
+        self.buffers = [self.backend.host_buffer(part) for part in parts]
+        taken = np.array(all(b is not None for b in self.buffers))
+        self.comm.Allreduce(MPI.IN_PLACE, taken, op=MPI.LAND)
+        if not taken:
+            self.close()
+        return bool(taken)
+
+    def close(self):
+        """Free the parts (collective)."""
+        for buffer in self.buffers:
+            if buffer is not None and hasattr(buffer, "free"):
+                buffer.free()
+        self.buffers = []
+        if self.window is not None:
+            self.window.Free()
+        self.window, self.capacity = None, 0
+
+
 class Rank:
     """One rank's share of a scene over MPI communicator `comm`, held by `sim` (a Simulation made with id_order and
     keep: share's): the particles of its slab (owned) and of the others' near it (the halo) on its device between
@@ -163,6 +217,7 @@ class Rank:
         owner = decomposition.owners(self.slabs.layers_of(held["particle_x"][:, self.axis]), self.cuts)
         self.start_owned = take(held, owner == self.rank)  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
+        self.shared = Shared.make(comm, sim.backend)
         sim.resize(sim.n, self.owned_cells())
 
     def owned_cells(self):
@@ -232,18 +287,12 @@ class Rank:
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
         cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
         start = self.lap("counts", start)
-        # [2] each other rank's runs of rows: (names, first row, end row), read back one after the other
+        # [2] each other rank's runs of rows: (names, first row, end row), read back one after the other, and sent
         runs = [[] if q == r else self.runs(cuts, q) for q in range(self.size)]
-        sent = backend.read_regions([(name, a, b) for q_runs in runs for names, a, b in q_runs for name in names])
-        start = self.lap("rows", start)
+        regions = [(name, a, b) for q_runs in runs for names, a, b in q_runs for name in names]
         rows = np.array([[b - a for _, a, b in q_runs] or [0] * len(RUNS) for q_runs in runs], np.int64)
-        received_rows = np.empty_like(rows)
-        self.comm.Alltoall(rows, received_rows)
-        send_bytes, receive_bytes = (rows @ self.run_bytes, received_rows @ self.run_bytes)
-        received = backend.space_to_write(int(receive_bytes.sum()))
-        self.comm.Alltoallv([sent, (send_bytes, np.cumsum(send_bytes) - send_bytes), MPI.BYTE],
-                            [received, (receive_bytes, np.cumsum(receive_bytes) - receive_bytes), MPI.BYTE])
-        start = self.lap("alltoall", start)
+        received_rows, sources, start = self.swap_shared(regions, rows, start) if self.shared else \
+            self.swap(regions, rows, start)
         # [3] the new halo in the rows of the old: below the owned rows, then after them
         m, owned = int(received_rows.sum()), end - first
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
@@ -251,17 +300,59 @@ class Rank:
             backend.move_rows(end - moved, m, moved)
         self.cuts = cuts
         self.sim.resize(m + owned, self.owned_cells())
-        regions, at, offset = [], 0, 0
-        for count, names in zip(received_rows.reshape(-1), RUNS * self.size):
-            for name in names:
-                below = min(max(first - at, 0), count)  # (rows of the halo below the owned ones; the rest after)
-                size = self.row_bytes[name]
-                regions += [(name, at, offset, below), (name, end + at + below - first, offset + below * size,
-                                                        count - below)]
-                offset += count * size
-            at += count
-        backend.write_regions(received, regions)
+        at = 0
+        for q_rows, (data, offset) in zip(received_rows, sources):
+            regions = []
+            for count, names in zip(q_rows, RUNS):
+                for name in names:
+                    below = min(max(first - at, 0), count)  # (rows of the halo below the owned ones; the rest after)
+                    size = self.row_bytes[name]
+                    regions += [(name, at, offset, below), (name, end + at + below - first, offset + below * size,
+                                                            count - below)]
+                    offset += count * size
+                at += count
+            if any(q_rows):
+                backend.write_regions(data, regions)
         self.lap("write", start)
+
+    def swap(self, regions, rows, start):
+        """Send each rank its rows: `regions` read back (rank by rank, `rows` of each of RUNS for each), the rows
+        every rank sends this one (one Alltoall) and their bytes (one Alltoallv: byte counts are 32-bit, so under
+        2 GiB from one rank to another). Returns the rows received from each rank (ranks x RUNS), and for each rank
+        where its bytes are (host memory, the offset there), and the time."""
+        from mpi4py import MPI
+        sent = self.sim.backend.read_regions(regions)
+        start = self.lap("rows", start)
+        received_rows = np.empty_like(rows)
+        self.comm.Alltoall(rows, received_rows)
+        send_bytes, receive_bytes = rows @ self.run_bytes, received_rows @ self.run_bytes
+        received = self.sim.backend.space_to_write(int(receive_bytes.sum()))
+        offsets = np.cumsum(receive_bytes) - receive_bytes
+        self.comm.Alltoallv([sent, (send_bytes, np.cumsum(send_bytes) - send_bytes), MPI.BYTE],
+                            [received, (receive_bytes, offsets), MPI.BYTE])
+        return received_rows, [(received, int(offset)) for offset in offsets], self.lap("alltoall", start)
+
+    def swap_shared(self, regions, rows, start):
+        """swap's work through the ranks' shared memory (Shared): the rows every rank sends every other (one
+        Allgather), this rank's `regions` copied into its part, a barrier; each rank's bytes for this one are then
+        in that rank's part."""
+        every = np.empty((self.size, *rows.shape), np.int64)
+        self.comm.Allgather(rows, every)
+        sizes = every @ self.run_bytes  # (bytes rank s sends rank q)
+        if not self.shared.fit(int(sizes.sum(axis=1).max())):
+            self.shared = None
+            return self.swap(regions, rows, start)
+        self.sim.backend.read_regions(regions, into=self.shared.buffers[self.rank])
+        start = self.lap("rows", start)
+        self.comm.Barrier()  # (every part written; a part is written again after the next step's Allreduce)
+        offsets = np.cumsum(sizes, axis=1) - sizes
+        return every[:, self.rank], [(self.shared.buffers[q], int(offsets[q, self.rank])) for q in range(self.size)], \
+            self.lap("alltoall", start)
+
+    def close(self):
+        """Free the shared memory (collective: every rank, at the end of a run)."""
+        if self.shared:
+            self.shared.close()
 
     def runs(self, cuts, q):
         """The runs of rows this rank sends rank q for the next step, under the new `cuts`: (names, first row,
@@ -336,6 +427,9 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
         cuts, keep = share(scene, comm.Get_size(), comm.Get_rank(), buffer_dtype("particle_x", scene["physics.precision"]))
         with Simulation(scene, backend, id_order=True, keep=keep, **options) as sim:
             rank = Rank(sim, comm, cuts)
+            if root and progress:
+                print(f"{scene['name']}: {rank.size} ranks, the halo through "
+                      f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
             rank.gather()  # (rank 0: the start's state read, checked, its energy the bound of the later checks)
             if root:
                 run_folder.savez(CHECKPOINT, **rank.checkpoint)
@@ -357,6 +451,7 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                         rank.gather()
                         if root:
                             run_folder.savez(CHECKPOINT, **rank.checkpoint)
+            rank.close()
             if not root:
                 return None
             run_folder.savez("final.npz", **rank.final)

@@ -16,6 +16,7 @@ WHOLE_SIZE = 0xFFFFFFFFFFFFFFFF
 FENCE_TIMEOUT_NS = 3600 * 10**9
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 CONDITIONAL_RENDERING = "VK_EXT_conditional_rendering"
+HOST_MEMORY = "VK_EXT_external_memory_host"
 STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for copies, at least
 STAGING_MOST = 1 << 28  # ... and at most: a copy past that allocates its own
 
@@ -410,9 +411,11 @@ class Context:
         extensions = {_text(e.extensionName)
                       for e in vk.vkEnumerateDeviceExtensionProperties(self.physical_device, None)}
         self.conditional_rendering = CONDITIONAL_RENDERING in extensions
-        enabled, chain = [], vk.ffi.NULL
+        # host memory the device copies to and from directly, where it can (host_buffer: a rank's exchange)
+        self.host_memory = HOST_MEMORY in extensions
+        enabled, chain = [HOST_MEMORY] if self.host_memory else [], vk.ffi.NULL
         if self.conditional_rendering:
-            enabled = [CONDITIONAL_RENDERING]
+            enabled.append(CONDITIONAL_RENDERING)
             chain = vk.VkPhysicalDeviceConditionalRenderingFeaturesEXT(
                 sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_CONDITIONAL_RENDERING_FEATURES_EXT, conditionalRendering=1)
         self.device = vk.vkCreateDevice(self.physical_device, vk.VkDeviceCreateInfo(
@@ -422,6 +425,8 @@ class Context:
         if self.conditional_rendering:
             self.cmd_begin_conditional = vk.vkGetDeviceProcAddr(self.device, "vkCmdBeginConditionalRenderingEXT")
             self.cmd_end_conditional = vk.vkGetDeviceProcAddr(self.device, "vkCmdEndConditionalRenderingEXT")
+        if self.host_memory:
+            self.host_pointer_properties = vk.vkGetDeviceProcAddr(self.device, "vkGetMemoryHostPointerPropertiesEXT")
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
@@ -554,6 +559,39 @@ class Context:
         vk.vkBindBufferMemory(self.device, buffer, memory, 0)
         return buffer, memory, flags & host == host
 
+    def host_buffer(self, address, nbytes, name="host"):
+        """A Buffer over `nbytes` of this process's memory from `address` on (VK_EXT_external_memory_host), for
+        copies between it and the device's buffers (_copies); None where the device cannot import it (no such
+        extension, or an address or size it does not take: both aligned to 2 MiB are taken on every device we
+        know, whose alignment is 4 KiB). The memory must outlive the Buffer."""
+        if not self.host_memory:
+            return None
+        vk = self.vk
+        kind = vk.VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT
+        pointer = vk.ffi.cast("void *", address)
+        buffer = vk.vkCreateBuffer(self.device, vk.VkBufferCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO, size=nbytes, sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE,
+            usage=vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+            pNext=vk.VkExternalMemoryBufferCreateInfo(sType=vk.VK_STRUCTURE_TYPE_EXTERNAL_MEMORY_BUFFER_CREATE_INFO,
+                                                      handleTypes=kind)), None)
+        try:
+            types = self.host_pointer_properties(self.device, kind, pointer).memoryTypeBits
+            types &= vk.vkGetBufferMemoryRequirements(self.device, buffer).memoryTypeBits
+            memory = vk.vkAllocateMemory(self.device, vk.VkMemoryAllocateInfo(
+                sType=vk.VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO, allocationSize=nbytes,
+                memoryTypeIndex=(types & -types).bit_length() - 1,
+                pNext=vk.VkImportMemoryHostPointerInfoEXT(
+                    sType=vk.VK_STRUCTURE_TYPE_IMPORT_MEMORY_HOST_POINTER_INFO_EXT, handleType=kind,
+                    pHostPointer=pointer)), None)
+            vk.vkBindBufferMemory(self.device, buffer, memory, 0)
+        except (vk.VkError, vk.VkException):
+            vk.vkDestroyBuffer(self.device, buffer, None)
+            return None
+        host = Buffer.__new__(Buffer)
+        host.ctx, host.nbytes, host.name, host.buffer, host.memory, host.host_visible = (
+            self, nbytes, name, buffer, memory, False)
+        return host
+
     def _map(self, memory, nbytes, offset=0):
         vk = self.vk
         try:
@@ -611,32 +649,35 @@ class Context:
         rec.free()
 
     # ---- public ----
-    def read_regions(self, copies, nbytes):
-        """`nbytes` bytes (uint8) read back from buffers in one submission, for each (Buffer, its byte offset, the
-        byte offset in the result, byte count) of `copies`: a view of host memory that the next read_regions
-        overwrites (copy what is kept longer)."""
-        staging = self._staging(nbytes, "read_regions", math.inf)
-        self._copies([(buffer.buffer, staging.buffer, [(offset, at, count)])
+    def read_regions(self, copies, nbytes, into=None):
+        """`nbytes` bytes read back from buffers in one submission, for each (Buffer, its byte offset, the byte
+        offset in the result, byte count) of `copies`: into Buffer `into` (host_buffer's), or else a view (uint8)
+        of host memory that the next read_regions overwrites (copy what is kept longer)."""
+        target = into or self._staging(nbytes, "read_regions", math.inf)
+        self._copies([(buffer.buffer, target.buffer, [(offset, at, count)])
                       for buffer, offset, at, count in copies if count])
-        return staging.bytes[:nbytes]
+        return None if into else target.bytes[:nbytes]
 
     def space_to_write(self, nbytes):
         """Host memory of `nbytes` (uint8) for write_regions' `data`: filled there, it is not copied again."""
         return self._staging(nbytes, "write_regions", math.inf).bytes[:nbytes]
 
     def write_regions(self, data, copies):
-        """Write bytes of `data` (uint8; best in space_to_write's memory) into buffers in one submission: for each
-        (Buffer, the byte offset in `data`, the buffer's byte offset, byte count) of `copies`."""
+        """Write bytes of `data` into buffers in one submission, for each (Buffer, the byte offset in `data`, the
+        buffer's byte offset, byte count) of `copies`: `data` a Buffer (host_buffer's), or host memory (uint8; best
+        space_to_write's)."""
         copies = [c for c in copies if c[3]]
         if not copies:
             return
         for buffer, _, offset, count in copies:
             if offset + count > buffer.nbytes:
                 raise ValueError(f"{buffer.name}: {count} bytes at {offset} do not fit in {buffer.nbytes}")
-        staging = self._staging(data.nbytes, "write_regions", math.inf)
-        if not (len(data) and data.ctypes.data == staging.bytes.ctypes.data):
-            staging.bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
-        self._copies([(staging.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies])
+        source = data
+        if not isinstance(data, Buffer):
+            source = self._staging(data.nbytes, "write_regions", math.inf)
+            if not (len(data) and data.ctypes.data == source.bytes.ctypes.data):
+                source.bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
+        self._copies([(source.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies])
 
     def buffer(self, nbytes, name="buffer", uniform=False):
         return Buffer(self, nbytes, name, uniform)
