@@ -26,6 +26,7 @@ Simulation orders a cell's particles by their previous index, not their id, so i
 few ulps away at first, then as far apart as a flow lets two runs drift.
 """
 import contextlib
+import mmap
 import os
 import sys
 import time
@@ -146,7 +147,7 @@ class Shared:
     every rank is on one host and every device takes the memory, else None (then the rows go by Alltoallv; also
     where SPHCORE_MPI_EXCHANGE=alltoallv)."""
 
-    GRAIN = 2 << 20  # a part's bytes are a multiple of this (and its address one of the page: Vulkan's import)
+    GRAIN = mmap.PAGESIZE  # a part's address and bytes are multiples of the page, in every process's mapping alike
 
     def __init__(self, comm, backend):
         self.comm, self.backend, self.window, self.capacity, self.buffers = comm, backend, None, 0, []
@@ -170,10 +171,11 @@ class Shared:
         self.capacity = -(-int(nbytes * 1.25) // self.GRAIN) * self.GRAIN
         info = MPI.Info.Create()
         info.Set("alloc_shared_noncontig", "true")
-        self.window = MPI.Win.Allocate_shared(self.capacity, 1, info, comm=self.comm)
+        self.window = MPI.Win.Allocate_shared(self.capacity + self.GRAIN, 1, info, comm=self.comm)
         info.Free()
-        parts = [np.frombuffer(self.window.Shared_query(q)[0], np.uint8, self.capacity)
+        parts = [np.frombuffer(self.window.Shared_query(q)[0], np.uint8, self.capacity + self.GRAIN)
                  for q in range(self.comm.Get_size())]
+        parts = [part[-part.ctypes.data % self.GRAIN:][:self.capacity] for part in parts]  # (Open MPI's start inside one)
         self.buffers = [self.backend.host_buffer(part) for part in parts]
         taken = np.array(all(b is not None for b in self.buffers))
         self.comm.Allreduce(MPI.IN_PLACE, taken, op=MPI.LAND)

@@ -427,6 +427,11 @@ class Context:
             self.cmd_end_conditional = vk.vkGetDeviceProcAddr(self.device, "vkCmdEndConditionalRenderingEXT")
         if self.host_memory:
             self.host_pointer_properties = vk.vkGetDeviceProcAddr(self.device, "vkGetMemoryHostPointerPropertiesEXT")
+            host = vk.VkPhysicalDeviceExternalMemoryHostPropertiesEXT(
+                sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_EXTERNAL_MEMORY_HOST_PROPERTIES_EXT)
+            vk.vkGetPhysicalDeviceProperties2(self.physical_device, vk.VkPhysicalDeviceProperties2(
+                sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, pNext=host))
+            self.host_alignment = int(host.minImportedHostPointerAlignment)  # (4 KiB on NVIDIA's and lavapipe)
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
@@ -561,10 +566,11 @@ class Context:
 
     def host_buffer(self, address, nbytes, name="host"):
         """A Buffer over `nbytes` of this process's memory from `address` on (VK_EXT_external_memory_host), for
-        copies between it and the device's buffers (_copies); None where the device cannot import it (no such
-        extension, or an address or size it does not take: both aligned to 2 MiB are taken on every device we
-        know, whose alignment is 4 KiB). The memory must outlive the Buffer."""
-        if not self.host_memory:
+        copies between it and the device's buffers (_copies); None where the device cannot import it: no such
+        extension, an address or a size not a multiple of the device's `host_alignment` (never offered: after an
+        import of unaligned memory failed, NVIDIA's driver 580 failed every later allocation), or the import failed.
+        The memory must outlive the Buffer."""
+        if not self.host_memory or address % self.host_alignment or nbytes % self.host_alignment:
             return None
         vk = self.vk
         kind = vk.VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT
