@@ -441,3 +441,76 @@ def test_a_killed_rank_stops_every_rank(tmp_path):
                     str(saved + 10)], env=env, check=True, capture_output=True, timeout=900)
     assert int(np.load(tmp_path / "two" / "final.npz")["step"]) == saved + 10
 
+
+
+# Rank.gather against the path it replaced: every rank's owned particles loaded in id order onto rank 0's device,
+# read and checkpointed there (Simulation.read, checkpoint), rank 0's share loaded back; at the start and at step 40.
+OLD_GATHER = """
+import sys, numpy as np, sphcore
+from mpi4py import MPI
+from sphcore import parallel
+from sphcore.runner import final_arrays
+from sphcore.stepper import LOADED
+scene, out, comm = sphcore.Scene.load(sys.argv[1]), sys.argv[2], MPI.COMM_WORLD
+cuts, keep = parallel.share(scene, comm.Get_size(), comm.Get_rank())
+with sphcore.Simulation(scene, id_order=True, keep=keep) as sim:
+    rank = parallel.Rank(sim, comm, cuts)
+    for steps in (0, 40):
+        for _ in range(steps):
+            rank.step()
+        parts = comm.gather(rank.owned(), root=0)
+        if comm.Get_rank() == 0:
+            held = {name: sim.backend.read_rows(name, 0, sim.n) for name in LOADED}
+            whole = {name: np.concatenate([p[name] for p in parts]) for name in LOADED}
+            sim.load({name: v[np.argsort(whole["particle_id"], kind="stable")] for name, v in whole.items()})
+            sim.energy_start = None  # (the old path's own bound, from the start's state)
+            state = sim.read()
+            np.savez(f"{out}/old_checkpoint_{sim.step_count}.npz", **sim.checkpoint())
+            np.savez(f"{out}/old_final_{sim.step_count}.npz", **final_arrays(sim, state))
+            sim.load(held, rank.owned_cells())
+        if steps == 0:
+            sim.energy_start = None
+        rank.gather()
+        if comm.Get_rank() == 0:
+            np.savez(f"{out}/new_checkpoint_{sim.step_count}.npz", **rank.checkpoint)
+            np.savez(f"{out}/new_final_{sim.step_count}.npz", **rank.final)
+"""
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+@pytest.mark.parametrize("extra", [{}, {"list_skin": 0.2}], ids=["lists_every_step", "list_skin"])
+def test_gathered_checkpoint_is_the_old_paths_and_a_one_rank_runs(tmp_path, extra):
+    """The checkpoint and final.npz that 2 ranks gather on rank 0's host hold, array by array (names, order, dtypes,
+    bytes), what the path they replaced gave: every particle loaded onto rank 0's device in id order, read and
+    checkpointed there. Against a 1-rank Simulation(id_order=True) at the same step, whose buffers are in its
+    device's order: the same particle buffers once ordered by id, the same step, time, energy bound and parameter
+    block (every particle owned), which sphcore run --resume checks. (With reused lists the ranks build them every
+    step, a plain Simulation does not: its state is another.)"""
+    from sphcore.stepper import LOADED
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(small_dam_break(**extra)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                          "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-c", OLD_GATHER, str(scene_file),
+                          str(tmp_path)], env=env, capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    for step in (0, 40):
+        for kind in ("checkpoint", "final"):
+            old, new = (np.load(tmp_path / f"{path}_{kind}_{step}.npz") for path in ("old", "new"))
+            assert list(new) == list(old), kind
+            for name in old:
+                assert new[name].dtype == old[name].dtype and new[name].shape == old[name].shape, (kind, name)
+                assert new[name].tobytes() == old[name].tobytes(), (step, kind, name)
+    scene = sphcore.Scene.load(scene_file)
+    gathered = np.load(tmp_path / "new_checkpoint_40.npz")
+    assert gathered["params"].tobytes() == scene.params(scene.particle_count()).tobytes()
+    if extra:
+        return
+    with sphcore.Simulation(scene, id_order=True) as one:
+        one.step(40)
+        arrays = one.checkpoint()
+    order = np.argsort(arrays["buffer_particle_id"])
+    for name in LOADED:
+        assert np.array_equal(arrays[f"buffer_{name}"][order], gathered[f"buffer_{name}"]), name
+    for name in ("step", "energy_start", "params", "scene", "buffer_time_state", "buffer_grid_status"):
+        assert arrays[name].tobytes() == gathered[name].tobytes(), name
