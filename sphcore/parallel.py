@@ -15,8 +15,10 @@ a rank holds them in. A step:
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
       takes the same dt, the minimum over the ranks.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
-.pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0 in particle-id
-order and written there as a 1-rank run writes them; a checkpoint resumes on one rank (`sphcore run --resume`).
+.pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
+particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
+a checkpoint resumes on one rank (`sphcore run --resume`). At a snapshot each rank checks its own particles, the
+energy summed over the ranks. SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
 
