@@ -45,8 +45,10 @@ def check_grid(sim, status):
                               f"{sim.n} in {int(status[2])} steps (a counter overflow): please report this")
 
 
-def check_state(sim, state):
-    """Raise SimulationError at the first particle with a non-finite value or outside the box."""
+def check_state(sim, state, ids=None, world=None):
+    """Raise SimulationError at the first particle with a non-finite value or outside the box, or where the
+    energy grew (check_energy). `ids`: the particle ids of the rows of `state` (default: row i is particle i);
+    `world`: check_energy's figures over every rank (a rank of sphcore.parallel checks its own particles)."""
     for name, values in state.items():
         bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
         if bad.any():
@@ -58,9 +60,9 @@ def check_state(sim, state):
                      "look for stiffness or viscosity at the ends of their ranges")
             cause = sim.solver.blow_up_cause() or cause
             raise SimulationError(f"blow-up at step {sim.step_count} (t = {sim.time:.6g} s): {name} of "
-                                  f"particle {i} is {values[i]} ({int(bad.sum())} particles non-finite); "
+                                  f"particle {particle(i, ids)} is {values[i]} ({int(bad.sum())} particles non-finite); "
                                   f"likely cause: {cause}")
-    check_energy(sim, state)
+    check_energy(sim, state, world)
     if sim.scene["domain.boundary"] == "open":
         return
     check_bodies(sim, state)
@@ -71,7 +73,12 @@ def check_state(sim, state):
     outside = ((x < lo) | (x > hi)).any(axis=1)
     if outside.any():
         i = int(np.argmax(outside))
-        raise SimulationError(f"step {sim.step_count}: particle {i} at {x[i]} left the box {lo} .. {hi}")
+        raise SimulationError(f"step {sim.step_count}: particle {particle(i, ids)} at {x[i]} left the box {lo} .. {hi}")
+
+
+def particle(i, ids):
+    """The id of row i of a state whose rows' ids are `ids` (None: row i is particle i)."""
+    return i if ids is None else int(ids[i])
 
 
 def check_bodies(sim, state):
@@ -95,12 +102,24 @@ def check_bodies(sim, state):
                                   "the wall leaked (docs/models/walls.md: Limits)")
 
 
-def check_energy(sim, state):
+def energy_figures(scene, state, ids=None):
+    """check_energy's figures of `state`: (its energy [J; 2D: J/m], the largest speed [m/s], that particle's id
+    and position); of no particle (0, -1, -1, None). `ids` as check_state's."""
+    speed = np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1))
+    if len(speed) == 0:
+        return 0.0, -1.0, -1, None
+    i = int(np.argmax(speed))
+    return sum(energy_terms(scene, state)), float(speed[i]), particle(i, ids), state["particle_x"][i]
+
+
+def check_energy(sim, state, world=None):
     """Raise SimulationError if the energy grew past its start by 10 % (plus, per particle, the
     potential energy of a fall of h / 4 and the kinetic energy of 1 % of the sound
     speed), or a particle outruns twice the sound speed plus the free-fall speed (an explosion).
     The free-fall speed: from the top of the fluid to the floor, and in an open domain, where
-    nothing stops a fall, also |g| t. The message says which of the two failed, with its figures."""
+    nothing stops a fall, also |g| t. The message says which of the two failed, with its figures.
+    `world`: energy_figures over every rank (sphcore.parallel), else those of `state`; a non-finite
+    energy there is another rank's non-finite values, which that rank names."""
     scene = sim.scene
     if sim.energy_start is None or scene["physics.surface_tension"]:  # cohesion's energy is not counted
         return
@@ -108,25 +127,23 @@ def check_energy(sim, state):
     g = math.sqrt(sum(a * a for a in scene["forces.gravity"])) if scene["physics.gravity"] else 0.0
     allowed = (sim.energy_start + 0.1 * abs(sim.energy_start)
                + sim.fluid_count * scene.mass * (g * scene.h / 4 + 0.5 * (0.01 * c) ** 2))
-    speed = np.sqrt((state["particle_v"].astype(np.float64) ** 2).sum(axis=1))
+    energy, top, i, x = energy_figures(scene, state) if world is None else world
     fall = scene.speed_estimate() + (g * sim.time if scene["domain.boundary"] == "open" else 0.0)
     limit = 2.0 * (c + fall)
-    energy = sum(energy_terms(scene, state))
-    if energy <= allowed and speed.max() <= limit:
+    if energy <= allowed and top <= limit or world is not None and not math.isfinite(energy):
         return
-    i = int(np.argmax(speed))
     went = "rose" if energy > sim.energy_start else "fell"
     if energy > allowed:
         what = (f"the energy rose from {sim.energy_start:.4g} J to {energy:.4g} J, past the {allowed:.4g} J "
-                f"allowed, and particle {i} moves at {speed[i]:.3g} m/s (sound speed {c:.3g} m/s)")
+                f"allowed, and particle {i} moves at {top:.3g} m/s (sound speed {c:.3g} m/s)")
     else:
-        what = (f"particle {i} moves at {speed[i]:.3g} m/s, past the {limit:.3g} m/s allowed (twice the sound "
+        what = (f"particle {i} moves at {top:.3g} m/s, past the {limit:.3g} m/s allowed (twice the sound "
                 f"speed {c:.3g} m/s plus the free-fall speed {fall:.3g} m/s), while the energy {went} from "
                 f"{sim.energy_start:.4g} J to {energy:.4g} J")
     dt_max, bound = stable_dt(scene, scene.speed_estimate())
     dt = scene.dt
     lo, hi = np.asarray(scene["domain.box_min"]), np.asarray(scene["domain.box_max"])
-    gap = min((state["particle_x"][i] - lo).min(), (hi - state["particle_x"][i]).min())
+    gap = min((x - lo).min(), (hi - x).min())
     if dt > dt_max:
         cause = f"time.dt = {dt:g} s exceeds the {bound} bound {dt_max:.3g} s"
     elif not (scene["physics.viscosity"] and scene.shear_viscosity > 0):

@@ -16,8 +16,10 @@ a rank holds them in. A step:
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
       takes the same dt, the minimum over the ranks.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
-.pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0 in particle-id
-order and written there as a 1-rank run writes them; a checkpoint resumes on one rank (`sphcore run --resume`).
+.pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
+particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
+a checkpoint resumes on one rank (`sphcore run --resume`). At a snapshot each rank checks its own particles, the
+energy summed over the ranks. SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
 
@@ -28,19 +30,22 @@ few ulps away at first, then as far apart as a flow lets two runs drift.
 import contextlib
 import mmap
 import os
+import signal
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from sphcore import decomposition, folder
+from sphcore import decomposition, folder, health
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
-from sphcore.checkpoint import CHECKPOINT
-from sphcore.errors import SceneError, SimulationError
+from sphcore.checkpoint import CARRIED, CHECKPOINT
+from sphcore.errors import Interrupted, SceneError, SimulationError
 from sphcore.output import SnapshotSeries, write_vtp
-from sphcore.plan import BUFFERS, buffer_dtype
+from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, buffer_dtype, in_particle_order
 from sphcore.runner import Schedule, _run_arguments, final_arrays
+from sphcore.signals import Signals
+from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.stepper import LOADED, Simulation
 from sphcore.vk_runner import Context
 
@@ -81,15 +86,15 @@ def take(particles, mask):
     return {name: values[mask] for name, values in particles.items()}
 
 
-def joined(parts):
-    """The particle arrays of `parts` (a list of dicts) in one dict."""
-    return {name: np.concatenate([p[name] for p in parts]) for name in LOADED}
+# What a rank sends rank 0 of its owned particles at a checkpoint (Rank.gather): every LOADED buffer, the ids first
+# (rank 0 places each row at its id), in pieces of PIECE rows at most (an MPI count is 32-bit: 2^26 rows of 4
+# components, 2^28 values).
+SENT = ("particle_id", *(name for name in LOADED if name != "particle_id"))
+PIECE = 1 << 26
 
 
-def in_id_order(parts):
-    """The particle arrays of `parts` (a list of dicts) in one dict, rows in global-id order."""
-    whole = joined(parts)
-    return take(whole, np.argsort(whole["particle_id"], kind="stable"))
+class Stopped(Interrupted):
+    """A signal stopped every rank at the same step, after a checkpoint (run): rank 0 says so, the others exit."""
 
 
 # What a halo particle sends: what a step reads of a neighbour before writing it. compute_density and compute_forces
@@ -388,28 +393,104 @@ class Rank:
             series.add_parallel(step, t, self.size, x, data)
 
     def gather(self):
-        """Rank 0: load every rank's owned particles, in id order, read them (sim.read(): checked), keep the
-        checkpoint's and final.npz's arrays of that (`checkpoint`, `final`) and load its own held set back. A message a rank: a pickled gather's counts and
-        displacements are 32-bit, and its whole would pass 2 GiB at about 27 M particles (80 bytes each)."""
-        if self.rank != 0:
-            self.comm.send(self.owned(), dest=0)
-            return None
+        """Every rank's owned particles (LOADED) on rank 0's host, each row at its particle id, and every rank's grid
+        status, checked there as read() checks a 1-rank run's (Simulation.checked); rank 0 keeps the arrays of the
+        checkpoint and final.npz of that (`checkpoint`, `final`): those a 1-rank run writes, of every particle in id
+        order. No device holds more than its share. A rank's rows cross as raw buffers (Send), a buffer at a time
+        in pieces of PIECE rows (an MPI count is 32-bit), their ids first; the energy bound (the first gather's)
+        goes to every rank."""
+        sim, owned = self.sim, self.owned()
+        statuses = self.comm.gather(sim.backend.read_buffer("grid_status"), root=0)
+        counts = self.comm.gather(len(owned["particle_id"]), root=0)
+        if self.rank == 0:
+            self.assemble(owned, statuses, counts)
+        else:
+            for name in SENT:
+                for k in range(0, len(owned[name]), PIECE):
+                    self.comm.Send(owned[name][k:k + PIECE], dest=0)
+        sim.energy_start = self.comm.bcast(sim.energy_start, root=0)
+        sim.checked_step = sim.step_count
+
+    def assemble(self, owned, statuses, counts):
+        """Rank 0's part of gather: its own particles `owned` and every other rank's (`counts` of them, received),
+        each buffer's rows placed at their ids (every id once: checked), read as a 1-rank run reads them."""
         sim = self.sim
-        held = {name: sim.backend.read_rows(name, 0, sim.n) for name in LOADED}
-        sim.load(in_id_order([self.owned()] + [self.comm.recv(source=r) for r in range(1, self.size)]))
-        state = sim.read()
-        self.checkpoint, self.final = sim.checkpoint(), final_arrays(sim, state)
-        sim.load(held, self.owned_cells())  # (the rows as they were: starts still says whose they are)
+        if sum(counts) != self.total:
+            raise SimulationError(f"step {sim.step_count}: the ranks own {sum(counts)} particles, not {self.total}")
+        whole = {name: np.empty((self.total, *values.shape[1:]), values.dtype) for name, values in owned.items()}
+        seen = np.zeros(self.total, bool)  # (as many rows as particles, each id seen: each once)
+        for r, count in enumerate(counts):
+            ids = None
+            for name in SENT:
+                values = owned[name] if r == 0 else self.received(whole[name], count, r)
+                if ids is None:
+                    ids = values.astype(np.int64)
+                    if (ids >= self.total).any():
+                        raise SimulationError(f"step {sim.step_count}: rank {r} holds particle id {ids.max()}, past "
+                                              f"the scene's {self.total} particles")
+                    seen[ids] = True
+                whole[name][ids] = values
+        if not seen.all():
+            raise SimulationError(f"step {sim.step_count}: particle {int(np.argmin(seen))} is owned by no rank (another "
+                                  "is owned twice)")
+        state = {name: values[:, :sim.dim] if values.ndim == 2 else values for name, values in whole.items()}
+        state = sim.checked(state, statuses)
+        carried = sim.backend.read([name for name in CARRIED if name not in LOADED])
+        carried["control"][CONTROL_REBUILD] = 1  # (a rank's next step builds its lists: every step does)
+        carried = {name: whole[name] if name in whole else carried[name] for name in CARRIED}
+        params = sim.params_of(self.total)  # (every particle owned: a 1-rank run's)
+        self.checkpoint, self.final = sim.checkpoint_of(carried, params), final_arrays(sim, state, params)
+
+    def received(self, like, count, source):
+        """`count` rows of a buffer (`like`'s dtype and row shape) that rank `source` sends (gather)."""
+        rows = np.empty((count, *like.shape[1:]), like.dtype)
+        for k in range(0, count, PIECE):
+            self.comm.Recv(rows[k:k + PIECE], source=source)
+        return rows
+
+    def check(self):
+        """Check the particles this rank owns, without gathering them, as read() checks a 1-rank run's
+        (sphcore.health): every per-particle buffer's owned rows, in id order (a message names a particle by its
+        id), this rank's grid status, and the energy bound with the energy summed over the ranks (in rank order)
+        and the fastest particle the fastest of theirs (allgather of health.energy_figures). A failure on any
+        rank is raised by the first rank that found one (main prints it and aborts every rank), which the
+        others wait for."""
+        sim, backend = self.sim, self.sim.backend
+        first, end = self.owned_rows()
+        state = in_particle_order({name: backend.read_rows(name, first, end) for name in PARTICLE_BUFFERS}, sim.dim)
+        ids = state["particle_id"]
+        figures = self.comm.allgather(health.energy_figures(sim.scene, state, ids))
+        world = (sum(f[0] for f in figures), *max(figures, key=lambda f: (f[1], -f[2]))[1:])
+        failure = None
+        try:
+            health.check_state(sim, state, ids, world)
+            health.check_grid(sim, backend.read_buffer("grid_status"))
+        except SimulationError as e:
+            failure = e
+        failed = [r for r, found in enumerate(self.comm.allgather(failure is not None)) if found]
+        if failed and failed[0] == self.rank:
+            raise failure
+        if failed:
+            self.comm.Barrier()  # (not passed: rank failed[0] aborts every rank)
+        sim.checked_step = sim.step_count
+
+    def stopped(self, signals):
+        """The first signal any rank received (sphcore.signals.Signals: `signals`), or 0: every rank stops at the
+        same step."""
+        from mpi4py import MPI
+        return self.comm.allreduce(signals.received or 0, op=MPI.MAX)
 
 
 def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=None, backend="numba",
         local_size=128, device=None):
     """Run `scene` decomposed over the ranks of `comm` (default: MPI's world), as sphcore.run does on one: snapshots
-    every time.output_every steps (or time.output_interval), a .vtp piece a rank and their .pvtp (write_piece); a
-    checkpoint at the start, every time.checkpoint_every steps and at the end, and final.npz, gathered on rank 0
-    in particle-id order and written there into `out_dir` (a checkpoint resumes on one rank: sphcore.resume).
-    Return the final arrays on rank 0, None on the others. On Vulkan each rank runs on `device` (an index or part
-    of a name), by default its host's rank-th GPU (rank_device)."""
+    every time.output_every steps (or time.output_interval), a .vtp piece a rank and their .pvtp (write_piece), each
+    rank's particles checked first (Rank.check); a checkpoint at the start, every time.checkpoint_every steps, at
+    the end and where SIGINT or SIGTERM stops the run (on any rank: every rank stops at that step, Stopped), and
+    final.npz, gathered on rank 0's host in particle-id order, checked there and written into `out_dir` (a
+    checkpoint resumes on one rank: sphcore.resume). Return the final arrays on rank 0, None on the others. On
+    Vulkan each rank runs on `device` (an index or part of a name), by default its host's rank-th GPU
+    (rank_device)."""
     comm = comm or world()
     check(scene, backend)
     options = {"local_size": local_size}
@@ -420,40 +501,52 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
     scene, steps, out_dir = _run_arguments(scene, backend, steps, out_dir, progress, None, overwrite, options)
     root = comm.Get_rank() == 0
     schedule = Schedule(scene, steps)
-    with folder.RunFolder(out_dir) if root else contextlib.nullcontext() as run_folder:  # (rank 0 writes)
-        if root:
+    with Signals() as signals, folder.RunFolder(out_dir) if root else contextlib.nullcontext() as run_folder:
+        if root:  # (rank 0 writes)
             folder.remove_stale_temporaries(out_dir)
             run_folder.prepare(scene["name"], resume=False, overwrite=overwrite)
             run_folder.write_bytes("scene.json", scene.to_json().encode())
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
         cuts, keep = share(scene, comm.Get_size(), comm.Get_rank(), buffer_dtype("particle_x", scene["physics.precision"]))
-        with Simulation(scene, backend, id_order=True, keep=keep, **options) as sim:
+        with Simulation(scene, backend, id_order=True, keep=keep, poll=signals.poll, **options) as sim:
             rank = Rank(sim, comm, cuts)
             if root and progress:
                 print(f"{scene['name']}: {rank.size} ranks, the halo through "
                       f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
-            rank.gather()  # (rank 0: the start's state read, checked, its energy the bound of the later checks)
-            if root:
-                run_folder.savez(CHECKPOINT, **rank.checkpoint)
+
+            def save_checkpoint():  # (every rank: the gather)
+                rank.gather()  # (the start's: its energy the bound of the later checks)
+                if root:
+                    run_folder.savez(CHECKPOINT, **rank.checkpoint)
 
             def snapshot():
                 rank.write_piece(series if root else None, out_dir, sim.step_count, sim.time)
 
+            save_checkpoint()
             snapshot()
-            t = schedule.time(sim)
+            signals.stepping = True
+            stopped, t = 0, schedule.time(sim)
             with schedule.progress(sim, t, disable=not (progress and root),
                                    desc=f"{scene['name']} [{backend} x {rank.size} ranks]") as bar:
-                while not schedule.done(sim, t):
+                while not schedule.done(sim, t) and not stopped:
                     rank.step()
                     before, t = t, schedule.time(sim)
                     bar.update(1 if schedule.end_time is None else min(t, schedule.end_time) - before)
+                    stopped = rank.stopped(signals)
+                    due = schedule.checkpoint_due(sim) or schedule.done(sim, t) or stopped
+                    if due:
+                        rank.gather()  # (checked there)
                     if schedule.snapshot_due(sim, before, t):
+                        if not due:
+                            rank.check()
                         snapshot()
-                    if schedule.checkpoint_due(sim) or schedule.done(sim, t):
-                        rank.gather()
-                        if root:
-                            run_folder.savez(CHECKPOINT, **rank.checkpoint)
+                    if due and root:
+                        run_folder.savez(CHECKPOINT, **rank.checkpoint)
             rank.close()
+            if stopped and not schedule.done(sim, t):
+                raise Stopped(stopped, f"interrupted by {signal.Signals(stopped).name} at step {sim.step_count} "
+                              f"{schedule.of(sim)} on {rank.size} ranks; checkpoint written: continue with "
+                              f"`sphcore run --resume {out_dir}` (on one rank)")
             if not root:
                 return None
             run_folder.savez("final.npz", **rank.final)
@@ -462,10 +555,15 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
 
 def main(run_args):
     """`sphcore run` under mpiexec: run_args (scene, steps, out, overwrite, local_size, backend, device) on every
-    rank; an error on a rank prints `rank R: message` and aborts every rank."""
+    rank; an error on a rank prints `rank R: message` and aborts every rank. A signal stops every rank at one step
+    (Stopped): rank 0 says so, the others exit with the same status."""
     comm = world()
     try:
         return run(**run_args, comm=comm)
+    except Stopped as e:
+        if comm.Get_rank() == 0 or comm.Get_size() == 1:
+            raise
+        sys.exit(128 + e.signum)
     except BaseException as e:
         print(f"sphcore: error: rank {comm.Get_rank()} of {comm.Get_size()}: {e}", file=sys.stderr, flush=True)
         if comm.Get_size() > 1:

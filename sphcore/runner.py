@@ -31,8 +31,10 @@ from sphcore.sph.dfsph import CONTROL_BUILDS
 from sphcore.stepper import Simulation
 
 
-def final_arrays(sim, state):
-    """The arrays of final.npz: state (position, velocity, density, pressure) and the parameters."""
+def final_arrays(sim, state, params=None):
+    """The arrays of final.npz: state (position, velocity, density, pressure) and the parameters (`params`, by
+    default the simulation's)."""
+    params = sim.params if params is None else params
     arrays = {
         "position": state["particle_x"],
         "velocity": state["particle_v"],
@@ -45,8 +47,8 @@ def final_arrays(sim, state):
         "mass": np.float64(sim.scene.mass),
         "h": np.float64(sim.scene.h),
     }
-    for field in sim.params.dtype.names:
-        arrays[f"param_{field}"] = np.asarray(sim.params[0][field])
+    for field in params.dtype.names:
+        arrays[f"param_{field}"] = np.asarray(params[0][field])
     if sim.spec.LIST_SKIN:  # reused lists: their builds since the start (the start's own included)
         arrays["list_builds"] = np.int64(sim.backend.read_buffer("control")[CONTROL_BUILDS])
     arrays.update(sim.solver.final_arrays())  # DFSPH: each step's dt, time, iterations and final errors

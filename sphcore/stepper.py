@@ -222,22 +222,30 @@ class Simulation:
         in `walls` (with their body's index, `body`). A check that fails more than one step after the last good one
         is replayed from there a step at a time, so the error names the first step at which the state went wrong."""
         raw = self.backend.read(READ)  # (not the scratch, the grid or the neighbour lists: each step rewrites them)
-        state = in_particle_order(raw, self.dim)
-        self.walls = {name: values[self.fluid_count:] for name, values in state.items()}
-        self.walls["body"] = self.wall_body
-        state = {name: values[:self.fluid_count] for name, values in state.items()}
         try:
-            health.check_state(self, state)
-            health.check_grid(self, raw["grid_status"])
+            state = self.checked(in_particle_order(raw, self.dim), [raw["grid_status"]])
         except SimulationError:
             if self._carried is not None and self.step_count - self.checked_step > 1:
                 self._replay()
             raise
-        self.checked_step = self.step_count
         self._carried = {name: raw[name] for name in CARRIED}
+        self.build_lists_next()
+        return state
+
+    def checked(self, state, statuses):
+        """The fluid's part of `state` (every particle's arrays, in particle order, vectors of `dim` components),
+        checked with the grid's `statuses` (one a backend: sphcore.health), the walls' part kept in `walls`; the
+        step is the last good one from now on, and the first state checked sets the energy bound. read() checks
+        the backend's buffers so; a rank of sphcore.parallel, every rank's particles gathered on the host."""
+        self.walls = {name: values[self.fluid_count:] for name, values in state.items()}
+        self.walls["body"] = self.wall_body
+        state = {name: values[:self.fluid_count] for name, values in state.items()}
+        health.check_state(self, state)
+        for status in statuses:
+            health.check_grid(self, status)
+        self.checked_step = self.step_count
         if self.energy_start is None:
             self.energy_start = sum(health.energy_terms(self.scene, state))
-        self.build_lists_next()
         return state
 
     @_exclusive
@@ -280,11 +288,18 @@ class Simulation:
         order would continue with its sums in another order, a few ulps away."""
         if self._carried is None or self.checked_step != self.step_count:
             self.read()
-        arrays = {f"buffer_{name}": values for name, values in self._carried.items()}
+        return self.checkpoint_of(self._carried, self.params)
+
+    @_exclusive
+    def checkpoint_of(self, carried, params):
+        """The arrays of a checkpoint at the current step of the CARRIED buffers `carried` (checked) and the
+        parameter block `params`: checkpoint()'s of the backend's, a rank of sphcore.parallel's of every rank's
+        particles gathered on the host (params_of their count)."""
+        arrays = {f"buffer_{name}": values for name, values in carried.items()}
         # the parameter block as its bytes: numpy's .npy writer leaves a record's padding uninitialised
         arrays.update(energy_start=np.float64(self.energy_start), step=np.int64(self.step_count),
                       scene=np.array(self.scene.to_json()),
-                      params=self.params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
+                      params=params.view(np.uint8), backend=np.array(self.backend.name), device=np.array(self.device_name))
         arrays.update(self.solver.checkpoint_arrays())
         if self.gauges is not None:  # the samples taken so far and each gauge's next time (a resume's rows)
             arrays["gauge_state"] = self.backend.read_buffer("gauge_state")
@@ -316,11 +331,16 @@ class Simulation:
         neighbour lists."""
         self.backend.resize(self._count(n, owned_cells))
 
+    def params_of(self, n, owned_cells=(0, 0)):
+        """The parameter block of n particles (the fluid's first) and `owned_cells` (load's)."""
+        params = self.scene.params(n, self.fluid_count)
+        params[0]["owned_first"], params[0]["owned_end"] = owned_cells
+        return params
+
     def _count(self, n, owned_cells):
         """The parameter block of n particles and `owned_cells`, taken as the simulation's; the next step builds its
         lists (those of the set held before are of other rows)."""
-        params = self.scene.params(n, self.fluid_count)
-        params[0]["owned_first"], params[0]["owned_end"] = owned_cells
+        params = self.params_of(n, owned_cells)
         self.params, self.n, self._carried = params, n, None
         control = self.backend.read_buffer("control")
         control[CONTROL_REBUILD] = 1

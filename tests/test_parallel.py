@@ -491,9 +491,207 @@ def test_a_killed_rank_stops_every_rank(tmp_path):
             run.kill()
             run.wait()
     assert run.returncode != 0
+    deadline = time.monotonic() + 30  # (mpiexec sends rank 0 SIGTERM, which it holds for a checkpoint, then SIGKILL)
+    while any(Path(f"/proc/{pid}").exists() for pid in ranks.values()) and time.monotonic() < deadline:
+        time.sleep(0.1)
     assert all(not Path(f"/proc/{pid}").exists() for pid in ranks.values())
     saved = int(np.load(tmp_path / "two" / "checkpoint.npz")["step"])
     subprocess.run([sys.executable, "-m", "sphcore", "run", "--resume", str(tmp_path / "two"), "--steps",
                     str(saved + 10)], env=env, check=True, capture_output=True, timeout=900)
     assert int(np.load(tmp_path / "two" / "final.npz")["step"]) == saved + 10
 
+
+
+# Rank.gather against the path it replaced: every rank's owned particles loaded in id order onto rank 0's device,
+# read and checkpointed there (Simulation.read, checkpoint), rank 0's share loaded back; at the start and at step 40.
+OLD_GATHER = """
+import sys, numpy as np, sphcore
+from mpi4py import MPI
+from sphcore import parallel
+from sphcore.runner import final_arrays
+from sphcore.stepper import LOADED
+scene, out, comm = sphcore.Scene.load(sys.argv[1]), sys.argv[2], MPI.COMM_WORLD
+cuts, keep = parallel.share(scene, comm.Get_size(), comm.Get_rank())
+with sphcore.Simulation(scene, id_order=True, keep=keep) as sim:
+    rank, bound = parallel.Rank(sim, comm, cuts), {}  # (each path's energy bound, from its read of the start)
+    for steps in (0, 40):
+        for _ in range(steps):
+            rank.step()
+        sim.energy_start = bound.get("new")
+        rank.gather()  # (first: the old path changes rank 0's device)
+        bound["new"] = sim.energy_start
+        if comm.Get_rank() == 0:
+            np.savez(f"{out}/new_checkpoint_{sim.step_count}.npz", **rank.checkpoint)
+            np.savez(f"{out}/new_final_{sim.step_count}.npz", **rank.final)
+        parts = comm.gather(rank.owned(), root=0)
+        if comm.Get_rank() == 0:
+            held = {name: sim.backend.read_rows(name, 0, sim.n) for name in LOADED}
+            whole = {name: np.concatenate([p[name] for p in parts]) for name in LOADED}
+            sim.load({name: v[np.argsort(whole["particle_id"], kind="stable")] for name, v in whole.items()})
+            sim.energy_start = bound.get("old")
+            state = sim.read()
+            bound["old"] = sim.energy_start
+            np.savez(f"{out}/old_checkpoint_{sim.step_count}.npz", **sim.checkpoint())
+            np.savez(f"{out}/old_final_{sim.step_count}.npz", **final_arrays(sim, state))
+            sim.load(held, rank.owned_cells())
+"""
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+@pytest.mark.parametrize("extra", [{}, {"list_skin": 0.2}], ids=["lists_every_step", "list_skin"])
+def test_gathered_checkpoint_is_the_old_paths_and_a_one_rank_runs(tmp_path, extra):
+    """The checkpoint and final.npz that 2 ranks gather on rank 0's host hold, array by array (names, order, dtypes,
+    bytes), what the path they replaced gave: every particle loaded onto rank 0's device in id order, read and
+    checkpointed there. Against a 1-rank Simulation(id_order=True) at the same step, whose buffers are in its
+    device's order: the same particle buffers once ordered by id, the same step, time, energy bound and parameter
+    block (every particle owned), which sphcore run --resume checks. (With reused lists the ranks build them every
+    step, a plain Simulation does not: its state is another.)"""
+    from sphcore.stepper import LOADED
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(small_dam_break(**extra)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                          "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-c", OLD_GATHER, str(scene_file),
+                          str(tmp_path)], env=env, capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    for step in (0, 40):
+        for kind in ("checkpoint", "final"):
+            old, new = (np.load(tmp_path / f"{path}_{kind}_{step}.npz") for path in ("old", "new"))
+            assert list(new) == list(old), kind
+            for name in old:
+                assert new[name].dtype == old[name].dtype and new[name].shape == old[name].shape, (kind, name)
+                assert new[name].tobytes() == old[name].tobytes(), (step, kind, name)
+    scene = sphcore.Scene.load(scene_file)
+    gathered = np.load(tmp_path / "new_checkpoint_40.npz")
+    assert gathered["params"].tobytes() == scene.params(scene.particle_count()).tobytes()
+    if extra:
+        return
+    with sphcore.Simulation(scene, id_order=True) as one:
+        one.read()  # (the start's: the energy bound, as a run reads it)
+        one.step(40)
+        arrays = one.checkpoint()
+    order = np.argsort(arrays["buffer_particle_id"])
+    for name in LOADED:
+        assert np.array_equal(arrays[f"buffer_{name}"][order], gathered[f"buffer_{name}"]), name
+    for name in ("step", "energy_start", "params", "scene", "buffer_time_state", "buffer_grid_status"):
+        assert arrays[name].tobytes() == gathered[name].tobytes(), name
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_a_blow_up_on_two_ranks_is_named_as_on_one(tmp_path):
+    """A dam break at 3 times its stable dt, a snapshot every step: its energy rises past the bound at step 6. On
+    2 ranks (each checking its own particles, the energy summed over both) the run stops with the one line a
+    1-rank run (sphcore run, one process) prints, behind the rank that reports it, after the same snapshots."""
+    config = small_dam_break()
+    config["time"] = {"dt": 2e-3, "steps": 400, "output_every": 1}
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(config))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    one = subprocess.run([sys.executable, "-m", "sphcore", "run", str(scene_file), "--out", str(tmp_path / "one")],
+                         env=env, capture_output=True, text=True, timeout=900)
+    two = two_ranks(scene_file, tmp_path / "two", env)
+    assert one.returncode == 1 and two.returncode != 0
+    message = one.stderr.split("\r")[-1].strip().splitlines()[-1]
+    assert message.startswith("sphcore: error: blow-up at step 6 ") and "the energy rose" in message, message
+    errors = [line for line in two.stderr.replace("\r", "\n").splitlines() if line.startswith("sphcore: error:")]
+    assert errors == [message.replace("sphcore: error: ", "sphcore: error: rank 0 of 2: ")], two.stderr[-2000:]
+    steps = [sorted(int(re.search(r"_(\d{7})\.p?vtp", f.name)[1]) for f in (tmp_path / run).glob(pattern))
+             for run, pattern in (("one", "*.vtp"), ("two", "*.pvtp"))]
+    assert steps[0] == steps[1] == list(range(6))
+
+
+# A non-finite velocity written into one particle that rank 1 owns, then every rank's check (Rank.check): rank 1
+# reports it (its message in a file: the others wait for its abort), naming the particle by its id.
+NAN_ON_A_RANK = """
+import sys, numpy as np, sphcore
+from mpi4py import MPI
+from sphcore import parallel
+scene, out, comm = sphcore.Scene.load(sys.argv[1]), sys.argv[2], MPI.COMM_WORLD
+cuts, keep = parallel.share(scene, comm.Get_size(), comm.Get_rank())
+with sphcore.Simulation(scene, id_order=True, keep=keep) as sim:
+    rank = parallel.Rank(sim, comm, cuts)
+    rank.gather()
+    for _ in range(10):
+        rank.step()
+    if comm.Get_rank() == 1:
+        first, end = rank.owned_rows()
+        row = first + (end - first) // 2
+        v = sim.backend.read_rows("particle_v", row, row + 1)
+        v[0, 0] = np.nan
+        sim.backend.write_rows("particle_v", row, v)
+        open(f"{out}/id", "w").write(str(int(sim.backend.read_rows("particle_id", row, row + 1)[0])))
+    try:
+        rank.check()
+    except sphcore.errors.SimulationError as e:
+        open(f"{out}/rank{comm.Get_rank()}", "w").write(str(e))
+        comm.Abort(1)
+"""
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_a_bad_value_on_one_rank_is_named_by_that_rank_as_on_one(tmp_path):
+    """A NaN in one particle's velocity on rank 1: rank 1 alone reports it (rank 0 raises nothing, and waits), in
+    the words a 1-rank Simulation's read() uses for that particle (by its id) at that step."""
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(small_dam_break()))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                          "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-c", NAN_ON_A_RANK, str(scene_file),
+                          str(tmp_path)], env=env, capture_output=True, text=True, timeout=900)
+    assert run.returncode != 0
+    assert not (tmp_path / "rank0").exists() and (tmp_path / "rank1").exists(), run.stderr[-2000:]
+    particle = int((tmp_path / "id").read_text())
+    with sphcore.Simulation(sphcore.Scene.load(scene_file), id_order=True) as one:
+        one.read()
+        one.step(10)
+        ids = one.backend.read_buffer("particle_id")
+        v = one.backend.read_buffer("particle_v")
+        v[np.flatnonzero(ids == particle)[0], 0] = np.nan
+        one.backend.write_buffer("particle_v", v)
+        with pytest.raises(sphcore.errors.SimulationError) as expected:
+            one.read()
+    assert re.search(rf"particle_v of particle {particle} is \[ *nan ", str(expected.value)), expected.value
+    assert (tmp_path / "rank1").read_text() == str(expected.value)
+
+
+@pytest.mark.skipif(mpiexec() is None or not Path("/proc/self/environ").exists(),
+                    reason="needs mpi4py, an mpiexec (pip install 'sphcore[mpi]') and Linux's /proc")
+@pytest.mark.parametrize("signalled", [(0, 1), (1,)], ids=["every_rank", "rank_1"])
+def test_sigterm_to_the_ranks_writes_a_checkpoint_and_stops(tmp_path, signalled):
+    """SIGTERM to the ranks themselves (a batch system's time limit; mpiexec itself, sent SIGTERM, passes it on and
+    kills the ranks a moment later), to each or to one: every rank stops at the same step after a checkpoint there,
+    rank 0 says so in one line, the run exits with 143, and the checkpoint resumes on one rank."""
+    import signal
+    import time
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(small_dam_break(steps=100000)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run = subprocess.Popen([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                            "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-m", "sphcore", "run",
+                            str(scene_file), "--out", str(tmp_path / "two")], env=env,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 600
+        while not (tmp_path / "two" / "checkpoint.npz").exists() and time.monotonic() < deadline:
+            assert run.poll() is None, run.communicate()[1][-2000:]
+            time.sleep(0.5)
+        time.sleep(2)  # (stepping)
+        ranks = ranks_of(run.pid)
+        assert set(ranks) == {0, 1}, ranks
+        for r in signalled:
+            os.kill(ranks[r], signal.SIGTERM)
+        _, err = run.communicate(timeout=300)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert run.returncode == 128 + signal.SIGTERM, err[-2000:]
+    lines = [line for line in err.replace("\r", "\n").splitlines() if line.startswith("sphcore:")]
+    assert len(lines) == 1 and lines[0].startswith("sphcore: interrupted by SIGTERM at step "), err[-2000:]
+    stopped = int(lines[0].split(" at step ")[1].split()[0])
+    assert stopped > 0 and stopped % 1000 != 0  # (not a scheduled checkpoint's step: time.checkpoint_every)
+    assert int(np.load(tmp_path / "two" / "checkpoint.npz")["step"]) == stopped
+    assert not (tmp_path / "two" / "final.npz").exists()
+    subprocess.run([sys.executable, "-m", "sphcore", "run", "--resume", str(tmp_path / "two"), "--steps",
+                    str(stopped + 10)], env=env, check=True, capture_output=True, timeout=900)
+    assert int(np.load(tmp_path / "two" / "final.npz")["step"]) == stopped + 10
