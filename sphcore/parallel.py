@@ -9,8 +9,9 @@ a rank holds them in. A step:
       over the ranks (Allreduce, their total checked) and balanced, each cut moved a layer at most;
   [2] to every other rank, the owned rows of the cell layers near its slab: of those it may own at the next step
       (migration: every buffer of a particle), of those it may see (halo: the buffers a step reads of a neighbour,
-      HALO) (decomposition.bands: whole layers, so runs of rows), read back in one copy and sent through host
-      memory (one Alltoallv of bytes: nothing pickled, nothing picked on the host);
+      HALO) (decomposition.bands: whole layers, so runs of rows), read back in one copy, through host memory:
+      on one host the ranks' shared memory (Shared: on Vulkan each device copies into and out of it), else one
+      Alltoallv of bytes (nothing pickled, nothing picked on the host);
   [3] the received ones written over the old halo's rows;
   [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
@@ -108,7 +109,7 @@ MIGRANT = tuple(name for name in LOADED if name not in ("particle_a", "particle_
 RUNS = (MIGRANT, HALO, HALO)  # the buffers of the rows sent a rank: those it may own, those below and above them
 
 # The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the rows read
-# back, the Alltoall(v), the rows written), the stages, the dt.
+# back, the Alltoallv or the shared memory's barrier, the rows written), the stages, the dt.
 PARTS = ("exchange", "counts", "rows", "alltoall", "write", "stages", "dt")
 
 
@@ -191,7 +192,7 @@ class Shared:
     def close(self):
         """Free the parts (collective)."""
         for buffer in self.buffers:
-            if buffer is not None and hasattr(buffer, "free"):
+            if buffer is not None and hasattr(buffer, "free"):  # (numba's are the arrays themselves)
                 buffer.free()
         self.buffers = []
         if self.window is not None:
@@ -278,7 +279,8 @@ class Rank:
         checked: none lost, none twice) and the new cuts, each moved a layer at most; to each other rank the rows
         of the layers of this one's slab it may own at the next step (the MIGRANT buffers) or see as halo (the
         HALO buffers) (decomposition.bands: runs of rows, as the sort ordered the cells), read back in one copy
-        and sent in one Alltoallv; the received ones replace the old halo. The owned rows stay where they are:
+        into the ranks' shared memory (swap_shared) or sent in one Alltoallv (swap); the received ones replace the
+        old halo, in one copy from each rank's. The owned rows stay where they are:
         one that another rank owns now stays a step, farther than the halo's width from every particle this rank
         owns (its halo rows are replaced at the next step); the sort puts every cell in id order whatever the rows
         (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
