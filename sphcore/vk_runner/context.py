@@ -639,11 +639,7 @@ class Context:
 
     def _copy(self, src, dst, regions):
         """Copy (source offset, destination offset, bytes) `regions` from buffer `src` to `dst`, and wait."""
-        rec = Recording(self)
-        self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, len(regions),
-                                [self.vk.VkBufferCopy(srcOffset=a, dstOffset=b, size=n) for a, b, n in regions])
-        self.submit(rec.end())
-        rec.free()
+        self._copies([(src, dst, regions)])
 
     def _copies(self, copies):
         """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait."""
