@@ -8,8 +8,9 @@ removed.
 - The manifest, DIR/sphcore-run.json, lists every file a run (and `sphcore plot`, `--profile`)
   wrote there; it is rewritten (atomically) before each new file is written, so it never misses
   one. The names a run writes: scene.json, checkpoint.npz, final.npz, walls.vtp (the bodies' wall particles),
-  NAME.pvd, NAME_NNNNNNN.vtp (NAME: the scene's name), profile.json, gauges/NAME.csv (NAME: a gauge's), and
-  `sphcore plot`'s final.png and gauges.png.
+  NAME.pvd, NAME_NNNNNNN.vtp (NAME: the scene's name), a run on several ranks' NAME_NNNNNNN.pvtp and its pieces
+  NAME_NNNNNNN_pR.vtp (sphcore.parallel), profile.json, gauges/NAME.csv (NAME: a gauge's), and `sphcore plot`'s
+  final.png and gauges.png.
 - A file in the way, one of those names that no manifest lists (the user's own scene.json, a
   ParaView state NAME.pvd, an experiment's NAME_0000001.vtp), is never replaced or deleted: the
   run is refused naming it, --overwrite included.
@@ -44,12 +45,12 @@ from sphcore.output import atomic_file
 
 MANIFEST = "sphcore-run.json"
 GAUGES = "gauges"  # the gauges' subfolder: gauges/NAME.csv (sphcore.gauges)
-SNAPSHOT = re.compile(r".+_\d{7}\.vtp$")
+SNAPSHOT = re.compile(r".+_\d{7}(\.vtp|\.pvtp|_p\d+\.vtp)$")  # a snapshot, a parallel one, its piece
 RUN_FILES = ("checkpoint.npz", "final.npz", "final.png", "scene.json", "profile.json", "gauges.png", "walls.vtp")
 TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 # What `--overwrite` deletes (with the manifest's say-so), for `sphcore run --help`
 PATTERNS = ("checkpoint.npz, final.npz, final.png, profile.json, scene.json, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp, "
-            "gauges/NAME.csv, gauges.png")
+            "NAME_NNNNNNN.pvtp, NAME_NNNNNNN_pR.vtp, gauges/NAME.csv, gauges.png")
 
 
 def is_run_name(name):
@@ -64,8 +65,9 @@ def is_run_name(name):
 
 def names_of_run(scene_name):
     """A test for the names a run of the scene named `scene_name` writes (scene.json, checkpoint.npz,
-    final.npz, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp)."""
-    pattern = re.compile(rf"(scene\.json|checkpoint\.npz|final\.npz|walls\.vtp|{re.escape(scene_name)}(\.pvd|_\d{{7}}\.vtp))")
+    final.npz, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp, NAME_NNNNNNN.pvtp, NAME_NNNNNNN_pR.vtp)."""
+    pattern = re.compile(rf"(scene\.json|checkpoint\.npz|final\.npz|walls\.vtp|"
+                         rf"{re.escape(scene_name)}(\.pvd|_\d{{7}}(\.vtp|\.pvtp|_p\d+\.vtp)))")
     return lambda name: bool(pattern.fullmatch(name))
 
 

@@ -318,8 +318,8 @@ def test_overwrite_patterns_are_in_run_help(capsys):
         main(["run", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert f"the files its manifest ({MANIFEST}) lists are deleted, only under a run's names (checkpoint.npz, " \
-           "final.npz, final.png, profile.json, scene.json, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp, gauges/NAME.csv, " \
-           "gauges.png); " \
+           "final.npz, final.png, profile.json, scene.json, walls.vtp, NAME.pvd, NAME_NNNNNNN.vtp, NAME_NNNNNNN.pvtp, " \
+           "NAME_NNNNNNN_pR.vtp, gauges/NAME.csv, gauges.png); " \
            "files it did not write " \
            "are kept" in text
 

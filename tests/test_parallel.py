@@ -600,6 +600,35 @@ def test_a_blow_up_on_two_ranks_is_named_as_on_one(tmp_path):
     assert steps[0] == steps[1] == list(range(6))
 
 
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_a_run_over_an_aborted_two_rank_run_overwrites_its_pieces(tmp_path):
+    """A 2-rank run that blows up at step 6 (every rank aborted) leaves .pvtp snapshots and their pieces that its
+    manifest lists, as read back (sphcore.folder.listed): a stable 2-rank run `--overwrite` into the folder deletes
+    them and completes, its own files all listed; resumed on one rank, its .pvd keeps its .pvtp snapshots."""
+    from sphcore import folder
+    config = small_dam_break()
+    config["time"] = {"dt": 2e-3, "steps": 400, "output_every": 1}
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(config))
+    out, env = tmp_path / "two", {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    blown = two_ranks(scene_file, out, env)
+    assert blown.returncode != 0 and "blow-up at step 6 " in blown.stderr, blown.stderr[-2000:]
+    files = lambda: {f for f in os.listdir(out) if f != folder.MANIFEST}  # noqa: E731
+    assert {f"{config['name']}_0000005_p1.vtp", f"{config['name']}_0000005.pvtp"} <= files() == folder.listed(out)
+    config["time"] = {"steps": 20, "output_every": 10}
+    scene_file.write_text(toml(config))
+    run = two_ranks(scene_file, out, env, "--overwrite")
+    assert run.returncode == 0, run.stderr[-2000:]
+    snapshots = [f"{config['name']}_{k:07d}{end}" for k in (0, 10, 20) for end in (".pvtp", "_p0.vtp", "_p1.vtp")]
+    assert files() == folder.listed(out) == {"scene.json", "checkpoint.npz", "final.npz", f"{config['name']}.pvd",
+                                             *snapshots}
+    subprocess.run([sys.executable, "-m", "sphcore", "run", "--resume", str(out), "--steps", "30"], env=env,
+                   check=True, capture_output=True, timeout=900)
+    series = [name for name, _ in sphcore.output.read_pvd(out / f"{config['name']}.pvd")]
+    assert series == [f"{config['name']}_{k:07d}.pvtp" for k in (0, 10, 20)] + [f"{config['name']}_0000030.vtp"]
+    assert files() == folder.listed(out)
+
+
 # A non-finite velocity written into one particle that rank 1 owns, then every rank's check (Rank.check): rank 1
 # reports it (its message in a file: the others wait for its abort), naming the particle by its id.
 NAN_ON_A_RANK = """
