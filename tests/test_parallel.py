@@ -463,18 +463,15 @@ def ranks_of(parent):
     return found
 
 
-@pytest.mark.skipif(mpiexec() is None or not Path("/proc/self/environ").exists(),
-                    reason="needs mpi4py, an mpiexec (pip install 'sphcore[mpi]') and Linux's /proc")
-def test_a_killed_rank_stops_every_rank(tmp_path):
-    """SIGKILL to rank 1 mid-run ends the run (mpiexec fails, rank 0 does not wait for ever); the last checkpoint
-    rank 0 wrote is intact and resumes on one rank."""
-    import signal
+def stepping_on_two_ranks(tmp_path, env):
+    """A long 2D dam break started on 2 ranks (`sphcore run` into tmp_path/two), once it steps past its first
+    checkpoint: (the mpiexec process, {rank: pid})."""
     import time
     scene_file = tmp_path / "dam.toml"
     scene_file.write_text(toml(small_dam_break(steps=100000)))
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
-    run = subprocess.Popen([mpiexec(), "--allow-run-as-root", "--oversubscribe", "-n", "2", sys.executable, "-m",
-                            "sphcore", "run", str(scene_file), "--out", str(tmp_path / "two")], env=env,
+    run = subprocess.Popen([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                            "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-m", "sphcore", "run",
+                            str(scene_file), "--out", str(tmp_path / "two")], env=env,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 600
@@ -484,6 +481,23 @@ def test_a_killed_rank_stops_every_rank(tmp_path):
         time.sleep(2)  # (stepping)
         ranks = ranks_of(run.pid)
         assert set(ranks) == {0, 1}, ranks
+    except BaseException:
+        run.kill()
+        run.wait()
+        raise
+    return run, ranks
+
+
+@pytest.mark.skipif(mpiexec() is None or not Path("/proc/self/environ").exists(),
+                    reason="needs mpi4py, an mpiexec (pip install 'sphcore[mpi]') and Linux's /proc")
+def test_a_killed_rank_stops_every_rank(tmp_path):
+    """SIGKILL to rank 1 mid-run ends the run (mpiexec fails, rank 0 does not wait for ever); the last checkpoint
+    rank 0 wrote is intact and resumes on one rank."""
+    import signal
+    import time
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run, ranks = stepping_on_two_ranks(tmp_path, env)
+    try:
         os.kill(ranks[1], signal.SIGKILL)
         run.wait(timeout=120)
     finally:
@@ -691,22 +705,9 @@ def test_sigterm_to_the_ranks_writes_a_checkpoint_and_stops(tmp_path, signalled)
     kills the ranks a moment later), to each or to one: every rank stops at the same step after a checkpoint there,
     rank 0 says so in one line, the run exits with 143, and the checkpoint resumes on one rank."""
     import signal
-    import time
-    scene_file = tmp_path / "dam.toml"
-    scene_file.write_text(toml(small_dam_break(steps=100000)))
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
-    run = subprocess.Popen([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
-                            "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-m", "sphcore", "run",
-                            str(scene_file), "--out", str(tmp_path / "two")], env=env,
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run, ranks = stepping_on_two_ranks(tmp_path, env)
     try:
-        deadline = time.monotonic() + 600
-        while not (tmp_path / "two" / "checkpoint.npz").exists() and time.monotonic() < deadline:
-            assert run.poll() is None, run.communicate()[1][-2000:]
-            time.sleep(0.5)
-        time.sleep(2)  # (stepping)
-        ranks = ranks_of(run.pid)
-        assert set(ranks) == {0, 1}, ranks
         for r in signalled:
             os.kill(ranks[r], signal.SIGTERM)
         _, err = run.communicate(timeout=300)
