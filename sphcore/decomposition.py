@@ -13,7 +13,9 @@ drho, from their own neighbours' positions, velocities and densities) sum over p
 positions up to 2 h away along any axis, so along the slab axis too. With reused lists (physics.list_skin = s)
 a build lists pairs within (1 + s) h: `halo_width` is 2 (1 + s) h, twice the search's reach (Scene.reach).
 Wall images need nothing more: a particle's image across a wall is farther from an owned particle than the
-particle itself. The bodies' wall particles (Adami's wall_pressure, a third level) are not handled yet.
+particle itself. The bodies' wall particles (Adami's wall_pressure, a third level) are not handled yet. A height
+gauge's line takes the point below each of its points in the slab, half a spacing past the cut at most: the halo
+reaches that much farther.
 """
 import math
 import os
@@ -47,8 +49,9 @@ MARGIN = 1.01  # the halo's width over DEPTH reaches: the shaders test distances
 
 def halo_width(scene):
     """How far past its slab [m] a rank must see the particles of others for one step: DEPTH times the reach
-    (and MARGIN)."""
-    return DEPTH * scene.reach * MARGIN
+    (and MARGIN); with a height gauge, half a spacing more (its line's point below the slab: sample_gauges.comp)."""
+    height = any(gauge["quantity"] == "height" for gauge in scene.config.get("gauges", []))
+    return (DEPTH * scene.reach + (scene["fluid.spacing"] / 2 if height else 0.0)) * MARGIN
 
 
 def layers_of(coordinate, box_min, inv_cell, layers):

@@ -156,6 +156,14 @@ class GaugeReader:
         self.since = 0
 
     def read(self, backend):
+        return self.kept(self.samples(backend))
+
+    def kept(self, samples):
+        """Of each gauge's `samples` (rows of time, x, y, z) the columns of its CSV."""
+        return [rows[:, kept] for rows, kept in zip(samples, self.columns)]
+
+    def samples(self, backend):
+        """The new samples of each gauge as the device wrote them: (rows, 4) arrays of time, x, y, z."""
         state = np.asarray(backend.read_buffer("gauge_state"))
         taken = state[1::2, 1].astype(np.int64)
         new = taken - self.taken
@@ -163,14 +171,39 @@ class GaugeReader:
             g = int(np.argmax((new > GAUGE_SLOTS) | (new < 0)))
             raise SimulationError(f"gauge {self.names[g]!r}: {int(new[g])} samples since the last read, its ring "
                                   f"on the device holds {GAUGE_SLOTS}: samples were lost")
-        rows = [np.zeros((0, len(c))) for c in self.columns]
+        rows = [np.zeros((0, 4)) for _ in self.columns]
         if new.any():
             samples = np.asarray(backend.read_buffer("gauge_samples"), np.float64).reshape(len(taken), GAUGE_SLOTS, 4)
-            for g, kept in enumerate(self.columns):
-                slots = np.arange(self.taken[g], taken[g]) % GAUGE_SLOTS
-                rows[g] = samples[g][slots][:, kept]
+            for g in range(len(rows)):
+                rows[g] = samples[g][np.arange(self.taken[g], taken[g]) % GAUGE_SLOTS]
         self.taken, self.since = taken, 0
         return rows
+
+
+def merged(scene, ranks):
+    """The samples of each gauge from those of every rank of sphcore.parallel (`ranks`: GaugeReader.samples of each,
+    in rank order), as one rank takes them: a rank samples what lies in its slab, the time -1 where it took nothing
+    (sample_gauges.comp). A point's sample is the one rank's whose slab holds it; a height's, the highest rank's
+    that found the surface (value y 1: the slabs go up the line in rank order where it runs along their axis, and
+    lie beside it where not), else 0 (at the time of a rank's that took it). SimulationError where no rank took a
+    sample."""
+    out = []
+    for g, gauge in enumerate(scene.config["gauges"]):
+        counts = {len(samples[g]) for samples in ranks}
+        if len(counts) > 1:
+            raise SimulationError(f"gauge {gauge['name']!r}: the ranks took {sorted(counts)} samples, not as many")
+        rows = np.stack([samples[g] for samples in ranks])  # (ranks, samples, 4)
+        took = rows[:, :, 0] >= 0
+        if not took.any(axis=0).all():
+            raise SimulationError(f"gauge {gauge['name']!r}: no rank took one of its samples (no slab held "
+                                  f"{gauge.get('at')})")
+        pick = np.argmax(took, axis=0)  # (a point's: the first rank that took it, the only one)
+        if gauge["quantity"] == "height":
+            found = took & (rows[:, :, 2] == 1)
+            highest = len(ranks) - 1 - np.argmax(found[::-1], axis=0)
+            pick = np.where(found.any(axis=0), highest, pick)
+        out.append(rows[pick, np.arange(rows.shape[1])])
+    return out
 
 
 def csv_text(quantity, dim, rows, header=True):

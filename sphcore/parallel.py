@@ -19,8 +19,10 @@ a rank holds them in. A step:
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
-a checkpoint resumes on one rank (`sphcore run --resume`). At a snapshot each rank checks its own particles, the
-energy summed over the ranks. SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
+a checkpoint resumes on one rank (`sphcore run --resume`). A gauge samples on every rank what lies in its slab
+(sample_gauges.comp); rank 0 takes each sample from the rank that holds it (gauges.merged) and writes
+RUN/gauges/*.csv as one rank does (force and moment gauges are refused). At a snapshot each rank checks its own
+particles, the energy summed over the ranks. SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
 
@@ -38,10 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sphcore import decomposition, folder, health
+from sphcore import decomposition, folder, gauges, health
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
+from sphcore.gauges import GAUGE_SLOTS, GaugeFiles
 from sphcore.output import SnapshotSeries, write_vtp
 from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, buffer_dtype, in_particle_order
 from sphcore.runner import Schedule, _run_arguments, final_arrays
@@ -64,7 +67,8 @@ def check(scene, backend):
     refused = [("physics.pressure_solver", scene["physics.pressure_solver"] != "state_equation",
                 "DFSPH (its solves iterate over all ranks' particles)"),
                ("bodies", bool(scene["bodies"]), "bodies (their wall pressure reads a third neighbour level)"),
-               ("gauges", bool(scene.config.get("gauges")), "gauges (their samples sum over every rank)"),
+               ("gauges", any(g["quantity"] in gauges.ON_BODY for g in scene.config.get("gauges", [])),
+                "force and moment gauges (their sums run over every rank's particles in the buffers' order)"),
                ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)")]
     for key, bad, what in refused:
         if bad:
@@ -226,6 +230,7 @@ class Rank:
         self.start_owned = take(held, owner == self.rank)  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         self.shared = Shared.make(comm, sim.backend)
+        self.gauge_rows = []  # (rank 0: the gauges' samples read and not yet taken)
         sim.resize(sim.n, self.owned_cells())
 
     def owned_cells(self):
@@ -241,6 +246,10 @@ class Rank:
         `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the rows written), stages
         ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
+        if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
+            if self.sim.gauges.since >= GAUGE_SLOTS:
+                self.read_gauges()
+            self.sim.gauges.since += 1
         start = time.perf_counter()
         if self.starts is not None:
             self.exchange()  # [1]-[3]
@@ -256,6 +265,21 @@ class Rank:
         self.starts = np.append(backend.read_entries("cell_start", rows), self.sim.n).astype(np.int64)
         self.lap("stages", start)
         self.sim.step_count += 1
+
+    def read_gauges(self):
+        """The gauges' new samples of every rank, merged on rank 0 as one rank takes them (gauges.merged) and kept
+        there for take_gauge_rows (collective)."""
+        samples = self.comm.gather(self.sim.gauges.samples(self.sim.backend), root=0)
+        if self.rank == 0:
+            rows = self.sim.gauges.kept(gauges.merged(self.sim.scene, samples))
+            self.gauge_rows = rows if not self.gauge_rows else [np.concatenate(p) for p in zip(self.gauge_rows, rows)]
+
+    def take_gauge_rows(self):
+        """Rank 0: the samples of each gauge since the last call (Simulation.take_gauge_rows' on one rank);
+        collective."""
+        self.read_gauges()
+        rows, self.gauge_rows = self.gauge_rows, []
+        return rows
 
     def lap(self, part, start):
         """Add the seconds since `start` to `part`'s; return now."""
@@ -516,7 +540,17 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                 print(f"{scene['name']}: {rank.size} ranks, the halo through "
                       f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
 
+            files = GaugeFiles(run_folder, scene) if root and sim.gauges is not None else None
+
+            def write_gauges():  # (every rank: the samples gathered; before a checkpoint, which counts them)
+                if sim.gauges is not None:
+                    rows = rank.take_gauge_rows()
+                    if files is not None:
+                        files.add(rows)
+                        files.write()
+
             def save_checkpoint():  # (every rank: the gather)
+                write_gauges()
                 rank.gather()  # (the start's: its energy the bound of the later checks)
                 if root:
                     run_folder.savez(CHECKPOINT, **rank.checkpoint)
@@ -536,6 +570,8 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                     bar.update(1 if schedule.end_time is None else min(t, schedule.end_time) - before)
                     stopped = rank.stopped(signals)
                     due = schedule.checkpoint_due(sim) or schedule.done(sim, t) or stopped
+                    if due or schedule.snapshot_due(sim, before, t):
+                        write_gauges()
                     if due:
                         rank.gather()  # (checked there)
                     if schedule.snapshot_due(sim, before, t):

@@ -303,7 +303,7 @@ parallel.run(sphcore.Scene.load(sys.argv[1]), out_dir=sys.argv[2], progress=Fals
 
 
 def toml(config):
-    """A scene dict of small_dam_break as TOML."""
+    """A scene dict of small_dam_break as TOML (a list of tables, as [[gauges]], after the tables)."""
     def value(v):
         if isinstance(v, str):
             return f'"{v}"'
@@ -314,8 +314,12 @@ def toml(config):
         return repr(v)
     lines = [f'name = "{config["name"]}"']
     for table, keys in config.items():
-        if table != "name":
+        if isinstance(keys, dict):
             lines += [f"[{table}]"] + [f"{k} = {value(v)}" for k, v in keys.items()]
+    for table, rows in config.items():
+        if isinstance(rows, list):
+            for row in rows:
+                lines += [f"[[{table}]]"] + [f"{k} = {value(v)}" for k, v in row.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -339,12 +343,91 @@ def small_dam_break_3d():
             "forces": {"gravity": [0.0, 0.0, -9.81]}, "time": {"steps": 150, "output_every": 100}}
 
 
+def gauged(config):
+    """`config` with gauges of every quantity a run on several ranks takes: points at 0.05 m (the lower slab) and
+    0.3 m (the upper) up the slab axis (y in 2D, z in 3D), and heights whose lines cross the cut, as the column
+    falls and spreads."""
+    dim = config["physics"].get("dimension", 2)
+
+    def at(x, up):
+        return [x, up] if dim == 2 else [x, 0.1, up]
+    return {**config, "gauges": [
+        {"name": "p_low", "quantity": "pressure", "at": at(0.1, 0.05), "interval": 0.002},
+        {"name": "p_high", "quantity": "pressure", "at": at(0.1, 0.3), "interval": 0.002},
+        {"name": "v", "quantity": "velocity", "at": at(0.2, 0.05), "interval": 0.002},
+        {"name": "rho", "quantity": "density", "at": at(0.05, 0.3), "interval": 0.003},
+        {"name": "h_column", "quantity": "height", "at": at(0.1, 0.0), "interval": 0.002},
+        {"name": "h_front", "quantity": "height", "at": at(0.3, 0.0), "interval": 0.002}]}
+
+
+def assert_same_gauges(one, two, config):
+    """The gauges' CSV files of runs `one` and `two` (folders) are byte for byte the same, and hold a surface
+    found and a pressure measured (not all zeros)."""
+    for gauge in config["gauges"]:
+        name = f"gauges/{gauge['name']}.csv"
+        assert (one / name).read_bytes() == (two / name).read_bytes(), name
+    assert (np.loadtxt(one / "gauges/h_column.csv", delimiter=",", skiprows=1)[:, 1] > 0.3).all()
+    assert (np.loadtxt(one / "gauges/p_high.csv", delimiter=",", skiprows=1)[:, 1] > 0).any()
+
+
+def test_merged_gauges_take_each_sample_from_the_rank_that_holds_it():
+    """A point's sample comes from the one rank that took it (the others wrote the time -1); a height's from the
+    highest rank that found the surface, else 0; a sample no rank took is an error that names the gauge."""
+    from sphcore.errors import SimulationError
+    from sphcore.gauges import merged
+    scene = sphcore.Scene.from_dict(gauged(small_dam_break()))
+    skipped = [-1.0, 0.0, 0.0, 0.0]
+
+    def ranks(point, height):  # (every gauge a point as `point` gives it, the heights as `height`)
+        return [[np.array(height[r] if g["quantity"] == "height" else point[r], float).reshape(-1, 4)
+                 for g in scene.config["gauges"]] for r in range(3)]
+    point = [[skipped, skipped], [[0.1, 5.0, 6.0, 7.0], skipped], [skipped, [0.2, 8.0, 0.0, 0.0]]]
+    height = [[[0.1, 0.2, 1.0, 0.0], [0.2, 0.0, 0.0, 0.0]], [[0.1, 0.4, 1.0, 0.0], skipped],
+              [[0.1, 0.0, 0.0, 0.0], [0.2, 0.0, 0.0, 0.0]]]
+    out = merged(scene, ranks(point, height))
+    for g, gauge in enumerate(scene.config["gauges"]):
+        expected = [[0.1, 0.4, 1.0, 0.0], [0.2, 0.0, 0.0, 0.0]] if gauge["quantity"] == "height" else \
+            [[0.1, 5.0, 6.0, 7.0], [0.2, 8.0, 0.0, 0.0]]
+        assert out[g].tolist() == expected, gauge["name"]
+    point[2][1] = skipped
+    with pytest.raises(SimulationError, match="gauge 'p_low': no rank took one of its samples"):
+        merged(scene, ranks(point, height))
+
+
+@pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
+def test_a_rank_samples_the_gauges_of_its_slab(backend):
+    """A Simulation that owns the lower half of the grid's layers (as a rank does) samples the points in it as a
+    Simulation that owns them all, writes the time -1 for those above, and finds the column's surface above the
+    cut only where it owns the line's points there."""
+    if backend == "vulkan":
+        from conftest import vulkan_or_skip
+        vulkan_or_skip()
+    scene = sphcore.Scene.from_dict(gauged(small_dam_break()))
+    rows = []
+    for half in (False, True):
+        with sphcore.Simulation(scene, backend, id_order=True) as sim:
+            P = sim.params[0]
+            layers, per_layer = int(P["grid_dim"][1]), int(P["grid_dim"][0])
+            assert 0.05 < layers // 2 / P["inv_cell"] < 0.3  # (the cut between the points' heights)
+            if half:
+                sim.resize(sim.n, (0, layers // 2 * per_layer))
+            sim.step()
+            rows.append({g["name"]: r[0] for g, r in zip(scene.config["gauges"], sim.gauges.samples(sim.backend))})
+    whole, lower = rows
+    for name in ("p_low", "v"):
+        assert lower[name].tolist() == whole[name].tolist() and whole[name][0] == 0.0, name
+    for name in ("p_high", "rho"):
+        assert lower[name][0] == -1.0 and whole[name][1] > 0, name
+    assert whole["h_column"][1] > 0.45 and whole["h_column"][2] == 1.0  # (the surface found, value y)
+    assert lower["h_column"].tolist() == [0.0, 0.0, 0.0, 0.0]  # (the line's lower points taken: no surface there)
+
+
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-@pytest.mark.parametrize("config", [small_dam_break(), small_dam_break_3d()], ids=["2d", "3d"])
+@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(small_dam_break_3d())], ids=["2d", "3d"])
 def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     """`mpiexec -n 2 sphcore run` of a dam break (particles cross the cuts as the column falls) gives bitwise the
-    final state of the same driver on one rank, and its checkpoint resumes on one rank to the same bits as that
-    driver's."""
+    final state and the gauges of the same driver on one rank, and its checkpoint resumes on one rank to the same
+    bits as that driver's."""
     scene_file = tmp_path / "dam.toml"
     scene_file.write_text(toml(config))
     scene = sphcore.Scene.load(scene_file)
@@ -360,6 +443,7 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     one, two = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "two" / "final.npz")
     for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
         assert np.array_equal(one[name], two[name]), name
+    assert_same_gauges(tmp_path / "one", tmp_path / "two", config)
     # the snapshots: a .pvtp each, its pieces (a rank's each) holding every particle once, as the 1-rank piece
     pieces = re.compile(r".*_p\d+\.vtp")
     assert [f for f in sorted(os.listdir(tmp_path / "two")) if not pieces.fullmatch(f)] == \
@@ -388,6 +472,7 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     assert int(two["step"]) == steps + 20
     for name in ("position", "velocity", "density", "pressure", "time"):
         assert np.array_equal(one[name], two[name]), name
+    assert_same_gauges(tmp_path / "one", tmp_path / "two", config)
 
 
 def two_ranks(scene_file, out, env, *options):
@@ -400,11 +485,11 @@ def two_ranks(scene_file, out, env, *options):
 
 @pytest.mark.vulkan
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-@pytest.mark.parametrize("config", [small_dam_break(), small_dam_break_3d()], ids=["2d", "3d"])
+@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(small_dam_break_3d())], ids=["2d", "3d"])
 def test_dam_break_on_two_ranks_on_lavapipe(tmp_path, config):
     """The 2D and 3D dam breaks on 2 ranks on Vulkan (both on lavapipe here): bitwise the 1-rank driver on Vulkan,
-    and bitwise the 2-rank run on numba; the halo through shared memory (Vulkan: the device copies into and out of
-    it) and through MPI messages, each on both backends."""
+    and bitwise the 2-rank run on numba, the gauges too; the halo through shared memory (Vulkan: the device copies
+    into and out of it) and through MPI messages, each on both backends."""
     from conftest import vulkan_or_skip
     vulkan_or_skip()
     scene_file = tmp_path / "dam.toml"
@@ -426,6 +511,8 @@ def test_dam_break_on_two_ranks_on_lavapipe(tmp_path, config):
     for name in ("position", "velocity", "density", "pressure", "time", "dt"):
         assert np.array_equal(one[name], two[name]), name
         assert np.array_equal(cpu[name], two[name]), name
+    assert_same_gauges(tmp_path / "one", tmp_path / "vulkan", config)
+    assert_same_gauges(tmp_path / "one", tmp_path / "numba", config)
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")

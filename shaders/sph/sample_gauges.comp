@@ -18,6 +18,11 @@
 //     every run.
 // A sample is the row (time, value x, y, z) at slot `taken` mod GAUGE_SLOTS of the gauge's ring in gauge_samples,
 // which the host reads before it can fill (sphcore.gauges.GaugeReader). Layouts: sphcore/plan.py (BUFFERS).
+// On a rank of sphcore.parallel (P.owned_end > 0) a gauge samples what lies in the rank's slab (in_slab): a point
+// there, and of a height's line the points there and each one's point below (the halo reaches that far:
+// decomposition.halo_width), the surface found only between a point there and the one below. Its value y says
+// whether it found one (height); a rank that sampled nothing writes the time -1. sphcore.gauges.merged takes each
+// sample from the ranks' rows: the bits of one rank's.
 // Mirror: sphcore/sph/sample_gauges.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -78,25 +83,47 @@ real4 point_sums(real3 x, out real3 sum_v) {
     return sums;
 }
 
+// Whether point x lies in this rank's slab: the layer of its cell along the slab axis (the slowest: cells.glsl),
+// clamped into the grid as sphcore.decomposition.layers_of, among the cells owned_first .. owned_end - 1; every
+// point where the rank owns every particle (owned_end 0).
+bool in_slab(real3 x) {
+    if (P.owned_end == 0u) return true;
+    uint axis = DIM - 1u;
+    int layer = clamp(cell_of(x)[axis], 0, int(P.grid_dim[axis]) - 1);
+    uint first = uint(layer) * (P.cell_total / P.grid_dim[axis]);
+    return first >= P.owned_first && first < P.owned_end;
+}
+
 // The free surface's elevation above foot x on the vertical line, along axis `up` (0 where the mass sum never
-// reaches rho_0 / 2).
-real surface_height(real3 x, real step, uint up) {
+// reaches rho_0 / 2), of the points in the slab and the one below each (in_slab); `seen`: 0 where the slab holds
+// no point of the line, 1 where the surface is not found there, 2 where it is.
+real surface_height(real3 x, real step, uint up, out uint seen) {
     real x_up = x[up];
     real half_rest = real(0.5) * real(P.rest_density);
     real top = real(P.box_max[up]);
     real height = real(0.0);
     real before = real(0.0);
     real level = x_up;
+    seen = 0u;
     for (uint k = 0u; level <= top; ++k) {
         real3 at = x;
         at[up] = level;
-        real3 sum_v;
-        real mass = real(P.density_coef) * point_sums(at, sum_v).w;
-        // a fall below half the rest density between the last point and this one: the surface (the highest one)
-        if (k > 0u && before >= half_rest && mass < half_rest)
-            height = level - step + step * (before - half_rest) / (before - mass) - x_up;
-        before = mass;
-        level = x_up + real(k + 1u) * step;
+        real next = x_up + real(k + 1u) * step;
+        real3 above = x;
+        above[up] = next;
+        bool mine = in_slab(at);
+        if (mine || (next <= top && in_slab(above))) {
+            real3 sum_v;
+            real mass = real(P.density_coef) * point_sums(at, sum_v).w;
+            // a fall below half the rest density between the last point and this one: the surface (the highest)
+            if (mine && k > 0u && before >= half_rest && mass < half_rest) {
+                height = level - step + step * (before - half_rest) / (before - mass) - x_up;
+                seen = 2u;
+            }
+            if (mine) seen = max(seen, 1u);
+            before = mass;
+        }
+        level = next;
     }
     return height;
 }
@@ -116,7 +143,8 @@ void main() {
     real3 x = real3(gauge_table[2u * g].xyz);
     real3 aux = real3(gauge_table[2u * g + 1u].xyz);
     real4 value = real4(0.0);
-    if (kind.x <= DENSITY) {
+    bool sampled = kind.x >= FORCE || in_slab(x);  // (a height's: as its line finds)
+    if (kind.x <= DENSITY && sampled) {
         real3 sum_v;
         real4 sums = point_sums(x, sum_v);
         if (sums.x > real(0.0)) {
@@ -125,7 +153,12 @@ void main() {
             if (kind.x == DENSITY) value.x = sums.z / sums.x;
         }
     }
-    if (kind.x == HEIGHT) value.x = surface_height(x, aux.x, kind.y);
+    if (kind.x == HEIGHT) {
+        uint seen;
+        value.x = surface_height(x, aux.x, kind.y, seen);
+        value.y = real(seen == 2u);
+        sampled = seen > 0u;
+    }
     if (kind.x >= FORCE) {
         real3 force = real3(0.0);
         precise real3 moment = real3(0.0);  // (precise: r x a not contracted to fused multiply-adds, as the mirror)
@@ -140,7 +173,8 @@ void main() {
         value.xyz = mass * (kind.x == FORCE ? force : moment);
     }
     // [4] store: the row at the ring's next slot, the count, and the next multiple past t
-    gauge_samples[g * kind.w + progress.y % kind.w] = real4(real(time_state[0].z) + real(time_state[0].w), value.xyz);
+    real time = sampled ? real(time_state[0].z) + real(time_state[0].w) : real(-1.0);
+    gauge_samples[g * kind.w + progress.y % kind.w] = real4(time, value.xyz);
     uint next = max(progress.x + 1u, uint(t / interval));
     while (reached(t, float(next) * interval)) next += 1u;
     gauge_state[2u * g + 1u] = uvec4(next, progress.y + 1u, 0u, 0u);

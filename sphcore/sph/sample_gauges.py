@@ -2,8 +2,8 @@
 time of the step's start): a sample at the first step at or past each multiple of a gauge's interval. pressure,
 velocity, density: Shepard-normalised SPH interpolation at a point over the fluid within h (DualSPHysics'
 MeasureTool, GaugeVel), no mirror images; height: where the mass sum along the vertical line falls below
-rho_0 / 2 (DualSPHysics' GaugeSwl); force, moment: m sum a over a body's particles, in buffer order (the shader
-says more).
+rho_0 / 2 (DualSPHysics' GaugeSwl); force, moment: m sum a over a body's particles, in buffer order. On a rank
+of sphcore.parallel, what lies in its slab: a sample it took nothing of has the time -1 (the shader says more).
 
 Mirror of shaders/sph/sample_gauges.comp: same names, same statement order, same step labels. A GLSL vec3
 local `v` is `v_x, v_y, v_z` here; the time's float32 arithmetic is numba's float32, as the shader's.
@@ -24,7 +24,7 @@ PRESSURE, VELOCITY, DENSITY, HEIGHT, FORCE, MOMENT = range(6)  # sphcore.gauges.
 
 @lru_cache(maxsize=None)
 def sample_gauges(spec, real=np.float32):
-    BODIES = spec.BODIES
+    BODIES, DIM = spec.BODIES, spec.DIM
     cell_of = cells(spec, real).cell_of
     range_count = cells(spec, real).range_count
     cell_range = cell_ranges(spec, real)
@@ -67,29 +67,51 @@ def sample_gauges(spec, real=np.float32):
         return sums_x, sums_y, sums_z, sums_w, sum_v_x, sum_v_y, sum_v_z
 
     @njit
+    def in_slab(P, x_x, x_y, x_z):
+        """Whether point x lies in this rank's slab: the layer of its cell along the slab axis, clamped into the
+        grid, among the cells owned_first .. owned_end - 1; every point where owned_end is 0."""
+        if P.owned_end == 0:
+            return True
+        axis = DIM - 1
+        layer = min(max(cell_of(P, x_x, x_y, x_z)[axis], 0), int(P.grid_dim[axis]) - 1)
+        first = layer * (int(P.cell_total) // int(P.grid_dim[axis]))
+        return first >= P.owned_first and first < P.owned_end
+
+    @njit
     def surface_height(P, x_x, x_y, x_z, step, up, particle_x, particle_v, particle_rho, particle_p, particle_id,
                        cell_pyramid, cell_start):
-        """The free surface's elevation above foot x on the vertical line, along axis `up` (0 where the mass sum
-        never reaches rho_0 / 2)."""
+        """(height, seen): the free surface's elevation above foot x on the vertical line, along axis `up` (0
+        where the mass sum never reaches rho_0 / 2), of the points in the slab and the one below each (in_slab);
+        seen 0 where the slab holds no point of the line, 1 where the surface is not found there, 2 where it is."""
         x_up = x_x if up == 0 else x_y if up == 1 else x_z
         half_rest = real(0.5) * real(P.rest_density)
         top = real(P.box_max[up])
         height = real(0.0)
         before = real(0.0)
         level = x_up
+        seen = 0
         k = 0
         while level <= top:
             at_x, at_y, at_z = x_x, x_y, x_z
             at_x, at_y, at_z = (level if up == 0 else at_x), (level if up == 1 else at_y), (level if up == 2 else at_z)
-            mass = real(P.density_coef) * point_sums(P, at_x, at_y, at_z, particle_x, particle_v, particle_rho,
-                                                     particle_p, particle_id, cell_pyramid, cell_start)[3]
-            # a fall below half the rest density between the last point and this one: the surface (the highest one)
-            if k > 0 and before >= half_rest and mass < half_rest:
-                height = level - step + step * (before - half_rest) / (before - mass) - x_up
-            before = mass
-            level = x_up + real(k + 1) * step
+            following = x_up + real(k + 1) * step
+            above_x, above_y, above_z = x_x, x_y, x_z
+            above_x, above_y, above_z = ((following if up == 0 else above_x), (following if up == 1 else above_y),
+                                         (following if up == 2 else above_z))
+            mine = in_slab(P, at_x, at_y, at_z)
+            if mine or (following <= top and in_slab(P, above_x, above_y, above_z)):
+                mass = real(P.density_coef) * point_sums(P, at_x, at_y, at_z, particle_x, particle_v, particle_rho,
+                                                         particle_p, particle_id, cell_pyramid, cell_start)[3]
+                # a fall below half the rest density between the last point and this one: the surface (the highest)
+                if mine and k > 0 and before >= half_rest and mass < half_rest:
+                    height = level - step + step * (before - half_rest) / (before - mass) - x_up
+                    seen = 2
+                if mine:
+                    seen = max(seen, 1)
+                before = mass
+            level = following
             k += 1
-        return height
+        return height, seen
 
     @njit
     def sample_gauges_main(g, params, particle_x, particle_v, particle_a, particle_rho, particle_p, particle_id,
@@ -114,7 +136,8 @@ def sample_gauges(spec, real=np.float32):
         aux_x, aux_y, aux_z = real(gauge_table[2 * g + 1, 0]), real(gauge_table[2 * g + 1, 1]), \
             real(gauge_table[2 * g + 1, 2])
         value_x = value_y = value_z = real(0.0)
-        if quantity <= DENSITY:
+        sampled = quantity >= FORCE or in_slab(P, x_x, x_y, x_z)  # (a height's: as its line finds)
+        if quantity <= DENSITY and sampled:
             sums_x, sums_y, sums_z, sums_w, sum_v_x, sum_v_y, sum_v_z = point_sums(
                 P, x_x, x_y, x_z, particle_x, particle_v, particle_rho, particle_p, particle_id, cell_pyramid, cell_start)
             if sums_x > real(0.0):
@@ -125,8 +148,10 @@ def sample_gauges(spec, real=np.float32):
                 if quantity == DENSITY:
                     value_x = sums_z / sums_x
         if quantity == HEIGHT:
-            value_x = surface_height(P, x_x, x_y, x_z, aux_x, body_first, particle_x, particle_v, particle_rho, particle_p,
-                                     particle_id, cell_pyramid, cell_start)
+            value_x, seen = surface_height(P, x_x, x_y, x_z, aux_x, body_first, particle_x, particle_v, particle_rho,
+                                           particle_p, particle_id, cell_pyramid, cell_start)
+            value_y = real(1.0) if seen == 2 else real(0.0)
+            sampled = seen > 0
         if quantity >= FORCE:
             force_x = force_y = force_z = real(0.0)
             moment_x = moment_y = moment_z = real(0.0)
@@ -148,7 +173,7 @@ def sample_gauges(spec, real=np.float32):
                 value_x, value_y, value_z = mass * moment_x, mass * moment_y, mass * moment_z
         # [4] store: the row at the ring's next slot, the count, and the next multiple past t
         row = g * slots + taken % slots
-        gauge_samples[row, 0] = real(time_state[0, 2]) + real(time_state[0, 3])
+        gauge_samples[row, 0] = real(time_state[0, 2]) + real(time_state[0, 3]) if sampled else real(-1.0)
         gauge_samples[row, 1] = value_x
         gauge_samples[row, 2] = value_y
         gauge_samples[row, 3] = value_z
