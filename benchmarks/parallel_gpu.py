@@ -38,6 +38,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--count", type=int, default=1_000_000, help="particles in all, or a rank's with --per-rank")
     ap.add_argument("--per-rank", action="store_true", help="weak scaling: --count particles a rank")
+    ap.add_argument("--shape", type=int, nargs=3, metavar=("NX", "NY", "NZ"),
+                    help="the block's lattice in place of a cube (strong scaling: its NX NY NZ particles in all)")
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--warmup", type=int, default=3)
     ap.add_argument("--backend", default="vulkan", choices=("vulkan", "numba"))
@@ -50,7 +52,9 @@ def main():
     comm = MPI.COMM_WORLD
     size, rank_number = comm.Get_size(), comm.Get_rank()
     count = args.count * size if args.per_rank else args.count
-    scene, _ = make_case(count, dim=3, search="grid", room=args.room)
+    if args.shape:
+        count = args.shape[0] * args.shape[1] * args.shape[2]
+    scene, _ = make_case(count, dim=3, search="grid", room=args.room, shape=args.shape)
     options = {}
     if args.backend == "vulkan":
         options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())

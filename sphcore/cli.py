@@ -39,19 +39,8 @@ def cmd_run(args):
     from sphcore.runner import load_checkpoint, run  # (numba: only where a run starts)
     from sphcore import parallel
 
-    if parallel.launched_ranks() > 1:  # under mpiexec -n N: one run decomposed over the ranks (sphcore.parallel)
-        if args.resume or args.profile:
-            raise SceneError("--resume and --profile run on one rank: leave out mpiexec")
-        scene = Scene.load(args.scene)
-        out = Path(args.out or Path("runs") / scene["name"])
-        arrays = parallel.main(dict(scene=scene, steps=args.steps, out_dir=out, overwrite=args.overwrite,
-                                    local_size=args.local_size, backend=args.backend or "numba",
-                                    device=args.device))
-        if arrays is not None:
-            print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps on "
-                  f"{parallel.launched_ranks()} ranks, t = {float(arrays['time']):.4g} s -> {out}/final.npz")
-        return
-
+    if parallel.launched_ranks() > 1 and args.profile:
+        raise SceneError("--profile runs on one rank: leave out mpiexec")
     scene = Scene.load(args.scene) if args.scene else None
     checkpoint = None
     if args.resume:
@@ -65,6 +54,15 @@ def cmd_run(args):
     else:
         out = Path(args.out or Path("runs") / scene["name"])
     backend = args.backend or (str(checkpoint["backend"]) if checkpoint is not None else "numba")
+    resumed = f" (resumed at step {int(checkpoint['step'])})" if checkpoint is not None else ""
+    if parallel.launched_ranks() > 1:  # under mpiexec -n N: one run decomposed over the ranks (sphcore.parallel)
+        arrays = parallel.main(dict(scene=scene, steps=args.steps, out_dir=out, overwrite=args.overwrite,
+                                    local_size=args.local_size, backend=backend, device=args.device,
+                                    checkpoint=checkpoint))
+        if arrays is not None:
+            print(f"{len(arrays['position'])} particles, {int(arrays['step'])} steps{resumed} on "
+                  f"{parallel.launched_ranks()} ranks, t = {float(arrays['time']):.4g} s -> {out}/final.npz")
+        return
     options = {"local_size": args.local_size}
     if args.profile:  # a profile.json of someone else's stops the run before it starts, not after
         if (out / "profile.json").exists() and "profile.json" not in (folder.listed(out) or ()):
@@ -76,7 +74,6 @@ def cmd_run(args):
         options.update(device=args.device, validation=args.validation or None)
     arrays = run(scene, backend, steps=args.steps, out_dir=out, checkpoint=checkpoint, overwrite=args.overwrite,
                  **options)
-    resumed = f" (resumed at step {int(checkpoint['step'])})" if checkpoint is not None else ""
     if args.profile:
         from sphcore.profile import work
         per_stage, pairs = work(scene, arrays["position"])

@@ -138,11 +138,12 @@ class Slabs:
         return decomposition.needed_by(x, owner, cuts, self.box_min, self.cell_size, self.width, rank)
 
 
-def share(scene, ranks, rank, precision=np.float32):
+def share(scene, ranks, rank, precision=np.float32, x=None):
     """The start of rank `rank` of `ranks`: (cuts, keep), the cuts balanced over the scene's initial particles and
     the mask of those the rank holds (its own, its halo). Every rank computes the same from the scene's lattice
-    (positions only, at the buffers' `precision`); each builds its Simulation of these alone (keep)."""
-    x = scene.initial_positions().astype(precision)
+    (positions only, at the buffers' `precision`); each builds its Simulation of these alone (keep). `x`: the
+    particles' positions in place of the lattice's (a checkpoint's: Rank.restore)."""
+    x = scene.initial_positions().astype(precision) if x is None else x
     slabs = Slabs(scene, scene.params(len(x)))
     coordinate = x[:, slabs.axis]
     layer = slabs.layers_of(coordinate)
@@ -225,13 +226,26 @@ class Rank:
         self.run_bytes = np.array([sum(self.row_bytes[name] for name in names) for names in RUNS])
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
-        held = sim.backend.read(LOADED)
-        owner = decomposition.owners(self.slabs.layers_of(held["particle_x"][:, self.axis]), self.cuts)
-        self.start_owned = take(held, owner == self.rank)  # (the start's snapshot)
+        self.start_owned = self.held_owned()  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         self.shared = Shared.make(comm, sim.backend)
         self.gauge_rows = []  # (rank 0: the gauges' samples read and not yet taken)
         sim.resize(sim.n, self.owned_cells())
+
+    def restore(self, checkpoint):
+        """Continue from `checkpoint` (load_checkpoint's arrays: of a run on any number of ranks, or one): the cuts
+        balanced over its particles and this rank's share of them loaded (share, Simulation.restore), as at a
+        start. The energy bound is the scene's initial state's, gathered first (gather)."""
+        x = checkpoint["buffer_particle_x"]
+        self.cuts, keep = share(self.sim.scene, self.size, self.rank, x=x[:, :self.sim.dim])
+        self.sim.restore(checkpoint, keep, self.owned_cells())
+        self.start_owned, self.starts = self.held_owned(), None
+
+    def held_owned(self):
+        """Of the particles this rank holds at a start, those of its slab (LOADED arrays)."""
+        held = self.sim.backend.read(LOADED)
+        owner = decomposition.owners(self.slabs.layers_of(held["particle_x"][:, self.axis]), self.cuts)
+        return take(held, owner == self.rank)
 
     def owned_cells(self):
         """The cells of this rank's slab (params.glsl: owned_first, owned_end)."""
@@ -508,13 +522,15 @@ class Rank:
 
 
 def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=None, backend="numba",
-        local_size=128, device=None):
+        local_size=128, device=None, checkpoint=None):
     """Run `scene` decomposed over the ranks of `comm` (default: MPI's world), as sphcore.run does on one: snapshots
     every time.output_every steps (or time.output_interval), a .vtp piece a rank and their .pvtp (write_piece), each
     rank's particles checked first (Rank.check); a checkpoint at the start, every time.checkpoint_every steps, at
     the end and where SIGINT or SIGTERM stops the run (on any rank: every rank stops at that step, Stopped), and
-    final.npz, gathered on rank 0's host in particle-id order, checked there and written into `out_dir` (a
-    checkpoint resumes on one rank: sphcore.resume). Return the final arrays on rank 0, None on the others. On
+    final.npz, gathered on rank 0's host in particle-id order, checked there and written into `out_dir`. With
+    `checkpoint` (load_checkpoint's arrays of the run in `out_dir`, on any number of ranks) the run continues from
+    it (Rank.restore), on any number of ranks; one rank continues it as well (sphcore.resume). Return the final
+    arrays on rank 0, None on the others. On
     Vulkan each rank runs on `device` (an index or part of a name), by default its host's rank-th GPU
     (rank_device)."""
     comm = comm or world()
@@ -524,15 +540,18 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
         from mpi4py import MPI
         options["device"] = device if device is not None else rank_device(
             comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
-    scene, steps, out_dir = _run_arguments(scene, backend, steps, out_dir, progress, None, overwrite, options)
+    scene, steps, out_dir = _run_arguments(scene, backend, steps, out_dir, progress, checkpoint, overwrite, options)
     root = comm.Get_rank() == 0
     schedule = Schedule(scene, steps)
     with Signals() as signals, folder.RunFolder(out_dir) if root else contextlib.nullcontext() as run_folder:
         if root:  # (rank 0 writes)
             folder.remove_stale_temporaries(out_dir)
-            run_folder.prepare(scene["name"], resume=False, overwrite=overwrite)
-            run_folder.write_bytes("scene.json", scene.to_json().encode())
+            run_folder.prepare(scene["name"], resume=checkpoint is not None, overwrite=overwrite)
+            if checkpoint is None:
+                run_folder.write_bytes("scene.json", scene.to_json().encode())
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
+            if checkpoint is not None:
+                series.truncate(int(checkpoint["step"]))  # (snapshots past the checkpoint: of steps to run again)
         cuts, keep = share(scene, comm.Get_size(), comm.Get_rank(), buffer_dtype("particle_x", scene["physics.precision"]))
         with Simulation(scene, backend, id_order=True, keep=keep, poll=signals.poll, **options) as sim:
             rank = Rank(sim, comm, cuts)
@@ -540,7 +559,11 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                 print(f"{scene['name']}: {rank.size} ranks, the halo through "
                       f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
 
-            files = GaugeFiles(run_folder, scene) if root and sim.gauges is not None else None
+            if checkpoint is not None:
+                rank.gather()  # (the initial state's energy: the bound, checked against the checkpoint's)
+                rank.restore(checkpoint)
+            taken = checkpoint["gauge_state"][1::2, 1] if checkpoint is not None and sim.gauges is not None else None
+            files = GaugeFiles(run_folder, scene, taken) if root and sim.gauges is not None else None
 
             def write_gauges():  # (every rank: the samples gathered; before a checkpoint, which counts them)
                 if sim.gauges is not None:
@@ -558,8 +581,9 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             def snapshot():
                 rank.write_piece(series if root else None, out_dir, sim.step_count, sim.time)
 
-            save_checkpoint()
-            snapshot()
+            if checkpoint is None:
+                save_checkpoint()
+                snapshot()
             signals.stepping = True
             stopped, t = 0, schedule.time(sim)
             with schedule.progress(sim, t, disable=not (progress and root),
@@ -580,11 +604,13 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                         snapshot()
                     if due and root:
                         run_folder.savez(CHECKPOINT, **rank.checkpoint)
+            if sim.step_count == int(checkpoint["step"] if checkpoint is not None else -1):
+                rank.gather()  # (resumed and no step to run: the final arrays of the checkpoint's state)
             rank.close()
             if stopped and not schedule.done(sim, t):
                 raise Stopped(stopped, f"interrupted by {signal.Signals(stopped).name} at step {sim.step_count} "
                               f"{schedule.of(sim)} on {rank.size} ranks; checkpoint written: continue with "
-                              f"`sphcore run --resume {out_dir}` (on one rank)")
+                              f"`sphcore run --resume {out_dir}` (on any number of ranks)")
             if not root:
                 return None
             run_folder.savez("final.npz", **rank.final)

@@ -310,17 +310,17 @@ class Simulation:
         """Hold another set of particles from now on: `particles` maps every per-particle buffer of CARRIED
         (LOADED) to an array, rows in any order, with the particles' global ids in particle_id (ids of
         fluid_count and up are the bodies' wall particles). The other carried buffers (the time, the grid's
-        status, the iteration control) and the obstacles are kept, every other buffer is zeroed (as at the
+        status, the iteration control), the obstacles and the gauges (their table and state) are kept, every other buffer is zeroed (as at the
         start), and the next step builds its neighbour lists. A rank of sphcore.parallel loads its owned and halo
         particles at the start; `owned_cells`: the cells of its slab (params.glsl: owned_first, owned_end; (0, 0):
         every particle is owned). The backend stays (no compile, no new Vulkan device): its buffers keep their
         size while the set fits, n in the parameter block (Vulkan: its uniform) becomes the count, and the
         dispatch sizes follow it (backends: load). read() and checkpoint() check and save the whole scene: call
-        them with every particle loaded."""
-        if self.gauges is not None:
+        them with every particle loaded. With gauges, only a rank's (owned_cells given: its gauges sample its slab)."""
+        if self.gauges is not None and not any(owned_cells):
             raise SimulationError("Simulation.load(): the scene's gauges sample by particle id across the whole "
                                   "scene; a scene with [[gauges]] cannot load another particle set yet")
-        kept = [name for name in CARRIED if name not in LOADED] + ["obstacle_box"]
+        kept = [name for name in CARRIED if name not in LOADED] + ["obstacle_box", "gauge_table", "gauge_state"]
         params = self._count(len(particles["particle_id"]), owned_cells)
         self.backend.load(params, {name: particles[name] for name in LOADED}, kept)
 
@@ -348,11 +348,13 @@ class Simulation:
         return params
 
     @_exclusive
-    def restore(self, arrays):
+    def restore(self, arrays, keep=None, owned_cells=(0, 0)):
         """Continue from `arrays` (of `checkpoint()`, possibly on another backend): its buffers
         replace the backend's, its step becomes the step count. The energy bound is not taken
         from `arrays`: it is the energy of the scene's initial state, which the backend holds until
-        the first restore (a stored energy_start that differs from it is refused)."""
+        the first restore (a stored energy_start that differs from it is refused). A rank of sphcore.parallel
+        holds the rows `keep` (a mask) of the checkpoint's particles from then on (load: `owned_cells` its slab);
+        it has its energy_start of the initial state (gathered) first."""
         if self.energy_start is None:
             self.read()  # the initial state: its energy is the bound, as in a run never stopped
         stored = float(arrays.get("energy_start", math.nan))
@@ -361,8 +363,17 @@ class Simulation:
                 abs(self.energy_start) + self.fluid_count * self.scene.mass * 1e-4 * c2):
             raise CheckpointError(f"checkpoint field energy_start = {stored:.6g} J is not the energy of the scene's "
                                   f"initial state, {self.energy_start:.6g} J: the checkpoint was altered")
-        current = self.backend.read(CARRIED)
-        for name in CARRIED:
+        whole = CARRIED
+        if keep is not None:
+            total = self.scene.particle_count()
+            for name in LOADED:
+                if len(arrays[f"buffer_{name}"]) != total:
+                    raise CheckpointError(f"checkpoint buffer {name} has {len(arrays[f'buffer_{name}'])} rows, this "
+                                          f"scene {total} particles")
+            self.load({name: arrays[f"buffer_{name}"][keep] for name in LOADED}, owned_cells)
+            whole = [name for name in CARRIED if name not in LOADED]
+        current = self.backend.read(whole)
+        for name in whole:
             values = arrays[f"buffer_{name}"]
             if values.shape != current[name].shape or values.dtype != current[name].dtype:
                 raise CheckpointError(f"checkpoint buffer {name} is {values.dtype}{list(values.shape)}, this scene "

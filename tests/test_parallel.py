@@ -475,12 +475,41 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     assert_same_gauges(tmp_path / "one", tmp_path / "two", config)
 
 
+def on_ranks(ranks, env, *arguments):
+    """`mpiexec -n ranks sphcore run arguments`: the completed process."""
+    return subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                           "mpi_yield_when_idle", "1", "-n", str(ranks), sys.executable, "-m", "sphcore", "run",
+                           *arguments], env=env, capture_output=True, text=True, timeout=900)
+
+
 def two_ranks(scene_file, out, env, *options):
     """`mpiexec -n 2 sphcore run scene_file --out out options`: the completed process."""
-    return subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
-                           "mpi_yield_when_idle", "1", "-n", "2", sys.executable, "-m", "sphcore", "run",
-                           str(scene_file), "--out", str(out), *options], env=env, capture_output=True, text=True,
-                          timeout=900)
+    return on_ranks(2, env, str(scene_file), "--out", str(out), *options)
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_a_two_rank_run_resumes_on_three_ranks_bitwise(tmp_path):
+    """A 2-rank run of 120 steps, resumed on 3 ranks to 160 (`mpiexec -n 3 sphcore run --resume`), ends bitwise
+    where the 1-rank driver's run of 160 steps does, the gauges' files too; its .pvd lists the snapshots of
+    both."""
+    config = gauged(small_dam_break(steps=120))
+    (tmp_path / "dam.toml").write_text(toml(config))
+    config["time"] = {**config["time"], "steps": 160}
+    (tmp_path / "dam_160.toml").write_text(toml(config))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    subprocess.run([sys.executable, "-c", ONE_RANK, str(tmp_path / "dam_160.toml"), str(tmp_path / "one")], env=env,
+                   check=True, timeout=900)
+    run = two_ranks(tmp_path / "dam.toml", tmp_path / "two", env)
+    assert run.returncode == 0, run.stderr[-2000:]
+    run = on_ranks(3, env, "--resume", str(tmp_path / "two"), "--steps", "160")
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "160 steps (resumed at step 120) on 3 ranks" in run.stdout
+    one, two = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "two" / "final.npz")
+    for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
+        assert np.array_equal(one[name], two[name]), name
+    assert_same_gauges(tmp_path / "one", tmp_path / "two", config)
+    pvd = (tmp_path / "two" / "dam_break_2d_mpi.pvd").read_text()
+    assert re.findall(r'file="([^"]+)"', pvd) == [f"dam_break_2d_mpi_{k:07d}.pvtp" for k in (0, 100, 120, 160)]
 
 
 @pytest.mark.vulkan
