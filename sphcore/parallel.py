@@ -42,7 +42,7 @@ from sphcore import decomposition, folder, health
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
-from sphcore.output import SnapshotSeries, write_vtp
+from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
 from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, buffer_dtype, in_particle_order
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
@@ -63,7 +63,6 @@ def check(scene, backend):
     """Refuse (SceneError, one line) what this slice does not decompose yet."""
     refused = [("physics.pressure_solver", scene["physics.pressure_solver"] != "state_equation",
                 "DFSPH (its solves iterate over all ranks' particles)"),
-               ("bodies", bool(scene["bodies"]), "bodies (their wall pressure reads a third neighbour level)"),
                ("gauges", bool(scene.config.get("gauges")), "gauges (their samples sum over every rank)"),
                ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)")]
     for key, bad, what in refused:
@@ -134,11 +133,20 @@ class Slabs:
         return decomposition.needed_by(x, owner, cuts, self.box_min, self.cell_size, self.width, rank)
 
 
+def wall_particles(scene):
+    """The bodies' wall particles as a Simulation numbers them (ids fluid_count and up, body by body in lattice
+    order): positions (N_w, dim) and each one's body index."""
+    walls, body = scene.wall_positions()
+    order = np.argsort(body, kind="stable")
+    return walls[order], body[order]
+
+
 def share(scene, ranks, rank, precision=np.float32):
-    """The start of rank `rank` of `ranks`: (cuts, keep), the cuts balanced over the scene's initial particles and
-    the mask of those the rank holds (its own, its halo). Every rank computes the same from the scene's lattice
-    (positions only, at the buffers' `precision`); each builds its Simulation of these alone (keep)."""
-    x = scene.initial_positions().astype(precision)
+    """The start of rank `rank` of `ranks`: (cuts, keep), the cuts balanced over the scene's initial particles
+    (the fluid's, then the bodies' wall particles: in id order) and the mask of those the rank holds (its own, its
+    halo). Every rank computes the same from the scene's lattice (positions only, at the buffers' `precision`);
+    each builds its Simulation of these alone (keep)."""
+    x = np.concatenate([scene.initial_positions(), wall_particles(scene)[0]]).astype(precision)
     slabs = Slabs(scene, scene.params(len(x)))
     coordinate = x[:, slabs.axis]
     layer = slabs.layers_of(coordinate)
@@ -227,6 +235,8 @@ class Rank:
         self.starts = None  # (no step yet: the held set is not sorted)
         self.shared = Shared.make(comm, sim.backend)
         sim.resize(sim.n, self.owned_cells())
+        walls, body = wall_particles(sim.scene)  # (fixed: every rank knows them all, as health.check_bodies asks)
+        sim.walls = {"particle_x": walls.astype(buffer_dtype("particle_x", precision)), "body": body}
 
     def owned_cells(self):
         """The cells of this rank's slab (params.glsl: owned_first, owned_end)."""
@@ -379,8 +389,10 @@ class Rank:
     def write_piece(self, series, out_dir, step, t):
         """Each rank writes its owned particles (in the device's order) as its piece of snapshot `step`; rank 0
         (`series`, the others None) lists the pieces in the run folder's manifest first and, once all are written,
-        names them in the snapshot's .pvtp, listed in the .pvd."""
+        names them in the snapshot's .pvtp, listed in the .pvd. The fluid's alone, as a 1-rank run's snapshots
+        (the bodies' wall particles are in walls.vtp)."""
         dim, pieces, owned = self.sim.dim, None, self.owned()
+        owned = take(owned, owned["particle_id"] < self.sim.fluid_count)
         x = owned["particle_x"][:, :dim]
         data = {"velocity": owned["particle_v"][:, :dim], "density": owned["particle_rho"],
                 "pressure": owned["particle_p"]}
@@ -460,6 +472,7 @@ class Rank:
         sim, backend = self.sim, self.sim.backend
         first, end = self.owned_rows()
         state = in_particle_order({name: backend.read_rows(name, first, end) for name in PARTICLE_BUFFERS}, sim.dim)
+        state = take(state, state["particle_id"] < sim.fluid_count)  # (the fluid's: a 1-rank read checks those)
         ids = state["particle_id"]
         figures = self.comm.allgather(health.energy_figures(sim.scene, state, ids))
         world = (sum(f[0] for f in figures), *max(figures, key=lambda f: (f[1], -f[2]))[1:])
@@ -508,6 +521,10 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             folder.remove_stale_temporaries(out_dir)
             run_folder.prepare(scene["name"], resume=False, overwrite=overwrite)
             run_folder.write_bytes("scene.json", scene.to_json().encode())
+            if scene["bodies"]:  # the bodies' wall particles: fixed, written once (as sphcore.run does)
+                walls, body = wall_particles(scene)
+                run_folder.write_bytes("walls.vtp", vtp_bytes(walls.astype(buffer_dtype(
+                    "particle_x", scene["physics.precision"])), {"body": body}))
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
         cuts, keep = share(scene, comm.Get_size(), comm.Get_rank(), buffer_dtype("particle_x", scene["physics.precision"]))
         with Simulation(scene, backend, id_order=True, keep=keep, poll=signals.poll, **options) as sim:
