@@ -13,7 +13,10 @@ drho, from their own neighbours' positions, velocities and densities) sum over p
 positions up to 2 h away along any axis, so along the slab axis too. With reused lists (physics.list_skin = s)
 a build lists pairs within (1 + s) h: `halo_width` is 2 (1 + s) h, twice the search's reach (Scene.reach).
 Wall images need nothing more: a particle's image across a wall is farther from an owned particle than the
-particle itself. The bodies' wall particles (Adami's wall_pressure, a third level) are not handled yet. A height
+particle itself. With bodies a step reads a third level: a wall particle within h of an owned one gets its pressure
+and velocity (wall_pressure, Adami et al. 2012) from the fluid within h of it, whose densities and pressures are
+their own neighbours' sums (with continuity from those neighbours' positions, velocities and densities, a wall
+particle's among them: state, as its owner wrote it the step before). A height
 gauge's line takes the point below each of its points in the slab, half a spacing past the cut at most: the halo
 reaches that much farther.
 """
@@ -37,6 +40,7 @@ def launched_ranks():
 
 
 DEPTH = 2  # neighbour levels one step reads: forces of owned particles <- densities of neighbours <- positions
+BODIES_DEPTH = 3  # with bodies: forces <- a wall particle's pressure <- its fluid's densities <- positions
 
 
 def slab_axis(dim):
@@ -48,10 +52,12 @@ MARGIN = 1.01  # the halo's width over DEPTH reaches: the shaders test distances
 
 
 def halo_width(scene):
-    """How far past its slab [m] a rank must see the particles of others for one step: DEPTH times the reach
-    (and MARGIN); with a height gauge, half a spacing more (its line's point below the slab: sample_gauges.comp)."""
+    """How far past its slab [m] a rank must see the particles of others for one step: DEPTH (BODIES_DEPTH where
+    the scene has bodies) times the reach (and MARGIN); with a height gauge, half a spacing more (its line's point
+    below the slab: sample_gauges.comp)."""
     height = any(gauge["quantity"] == "height" for gauge in scene.config.get("gauges", []))
-    return (DEPTH * scene.reach + (scene["fluid.spacing"] / 2 if height else 0.0)) * MARGIN
+    depth = BODIES_DEPTH if scene.spec.BODIES else DEPTH
+    return (depth * scene.reach + (scene["fluid.spacing"] / 2 if height else 0.0)) * MARGIN
 
 
 def layers_of(coordinate, box_min, inv_cell, layers):

@@ -45,12 +45,12 @@ from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (
 from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
 from sphcore.gauges import GAUGE_SLOTS, GaugeFiles
-from sphcore.output import SnapshotSeries, write_vtp
+from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
 from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, buffer_dtype, in_particle_order
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
 from sphcore.sph.dfsph import CONTROL_REBUILD
-from sphcore.stepper import LOADED, Simulation
+from sphcore.stepper import LOADED, Simulation, wall_particles
 from sphcore.vk_runner import Context
 
 def world():
@@ -66,7 +66,6 @@ def check(scene, backend):
     """Refuse (SceneError, one line) what this slice does not decompose yet."""
     refused = [("physics.pressure_solver", scene["physics.pressure_solver"] != "state_equation",
                 "DFSPH (its solves iterate over all ranks' particles)"),
-               ("bodies", bool(scene["bodies"]), "bodies (their wall pressure reads a third neighbour level)"),
                ("gauges", any(g["quantity"] in gauges.ON_BODY for g in scene.config.get("gauges", [])),
                 "force and moment gauges (their sums run over every rank's particles in the buffers' order)"),
                ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)")]
@@ -139,11 +138,13 @@ class Slabs:
 
 
 def share(scene, ranks, rank, precision=np.float32, x=None):
-    """The start of rank `rank` of `ranks`: (cuts, keep), the cuts balanced over the scene's initial particles and
-    the mask of those the rank holds (its own, its halo). Every rank computes the same from the scene's lattice
-    (positions only, at the buffers' `precision`); each builds its Simulation of these alone (keep). `x`: the
-    particles' positions in place of the lattice's (a checkpoint's: Rank.restore)."""
-    x = scene.initial_positions().astype(precision) if x is None else x
+    """The start of rank `rank` of `ranks`: (cuts, keep), the cuts balanced over the scene's initial particles
+    (the fluid's, then the bodies' wall particles: in id order) and the mask of those the rank holds (its own, its
+    halo). Every rank computes the same from the scene's lattice (positions only, at the buffers' `precision`);
+    each builds its Simulation of these alone (keep). `x`: the particles' positions in place of the lattice's (a
+    checkpoint's: Rank.restore)."""
+    if x is None:
+        x = np.concatenate([scene.initial_positions(), wall_particles(scene)[0]]).astype(precision)
     slabs = Slabs(scene, scene.params(len(x)))
     coordinate = x[:, slabs.axis]
     layer = slabs.layers_of(coordinate)
@@ -231,6 +232,8 @@ class Rank:
         self.shared = Shared.make(comm, sim.backend)
         self.gauge_rows = []  # (rank 0: the gauges' samples read and not yet taken)
         sim.resize(sim.n, self.owned_cells())
+        walls, body = wall_particles(sim.scene)  # (fixed: every rank knows them all, as health.check_bodies asks)
+        sim.walls = {"particle_x": walls.astype(buffer_dtype("particle_x", precision)), "body": body}
 
     def restore(self, checkpoint):
         """Continue from `checkpoint` (load_checkpoint's arrays: of a run on any number of ranks, or one): the cuts
@@ -417,8 +420,10 @@ class Rank:
     def write_piece(self, series, out_dir, step, t):
         """Each rank writes its owned particles (in the device's order) as its piece of snapshot `step`; rank 0
         (`series`, the others None) lists the pieces in the run folder's manifest first and, once all are written,
-        names them in the snapshot's .pvtp, listed in the .pvd."""
+        names them in the snapshot's .pvtp, listed in the .pvd. The fluid's alone, as a 1-rank run's snapshots
+        (the bodies' wall particles are in walls.vtp)."""
         dim, pieces, owned = self.sim.dim, None, self.owned()
+        owned = take(owned, owned["particle_id"] < self.sim.fluid_count)
         x = owned["particle_x"][:, :dim]
         data = {"velocity": owned["particle_v"][:, :dim], "density": owned["particle_rho"],
                 "pressure": owned["particle_p"]}
@@ -498,6 +503,7 @@ class Rank:
         sim, backend = self.sim, self.sim.backend
         first, end = self.owned_rows()
         state = in_particle_order({name: backend.read_rows(name, first, end) for name in PARTICLE_BUFFERS}, sim.dim)
+        state = take(state, state["particle_id"] < sim.fluid_count)  # (the fluid's: a 1-rank read checks those)
         ids = state["particle_id"]
         figures = self.comm.allgather(health.energy_figures(sim.scene, state, ids))
         world = (sum(f[0] for f in figures), *max(figures, key=lambda f: (f[1], -f[2]))[1:])
@@ -549,6 +555,10 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             run_folder.prepare(scene["name"], resume=checkpoint is not None, overwrite=overwrite)
             if checkpoint is None:
                 run_folder.write_bytes("scene.json", scene.to_json().encode())
+            if scene["bodies"] and checkpoint is None:  # the bodies' wall particles: fixed, written once
+                walls, body = wall_particles(scene)
+                run_folder.write_bytes("walls.vtp", vtp_bytes(walls.astype(buffer_dtype(
+                    "particle_x", scene["physics.precision"])), {"body": body}))
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
             if checkpoint is not None:
                 series.truncate(int(checkpoint["step"]))  # (snapshots past the checkpoint: of steps to run again)

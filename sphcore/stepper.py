@@ -28,6 +28,14 @@ READ = tuple(dict.fromkeys((*PARTICLE_BUFFERS, "grid_status", *CARRIED)))
 LOADED = tuple(name for name in CARRIED if BUFFERS[name][2] == "particles")
 
 
+def wall_particles(scene):
+    """The bodies' wall particles as a Simulation numbers them (ids fluid_count and up, body by body, each in its
+    lattice's order): positions (N_w, dim) and each one's body index."""
+    walls, body = scene.wall_positions()
+    order = np.argsort(body, kind="stable")
+    return walls[order], body[order]
+
+
 def _exclusive(method):
     """A method of Simulation that uses its backend: refused (SimulationError) once the simulation is
     closed, and while another thread is inside one of these methods (a backend's buffers and a Vulkan
@@ -110,9 +118,7 @@ class Simulation:
         self.scene = scene
         # the fluid's particles, then the bodies' wall particles, body by body (fixed: ids fluid_count and up)
         x0 = scene.initial_positions()
-        walls, self.wall_body = scene.wall_positions()
-        order = np.argsort(self.wall_body, kind="stable")
-        walls, self.wall_body = walls[order], self.wall_body[order]
+        walls, self.wall_body = wall_particles(scene)
         self.fluid_count = len(x0)
         self.buried = geometry.buried_keys(walls, scene["domain.box_min"], scene["domain.box_max"],
                                            scene["fluid.spacing"])  # (health.check_bodies)
