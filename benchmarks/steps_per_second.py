@@ -57,6 +57,14 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.
     """(scene, positions) for exactly n particles: see the module docstring. 3D: the box `room` blocks long; `shape`
     (3D): the block's lattice points along each axis in place of a cube's (n their product)."""
     from sphcore.scene import Scene
+    scene = Scene.from_dict(case_config(n, dim, search, spacing, list_skin, room, shape))
+    x = scene.initial_positions()
+    assert len(x) >= n, (len(x), n)
+    return scene, x[:n]
+
+
+def case_config(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.0, shape=None):
+    """The scene of make_case as a dict (Scene.from_dict's)."""
     if dim == 2:
         side = math.ceil(math.sqrt(n))
         block = side * spacing
@@ -76,10 +84,7 @@ def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.
         config["physics"]["list_skin"] = list_skin
     config["name"] = f"bench_{dim}d_{search}_{n}"
     config["fluid"] = {**config["fluid"], "spacing": spacing, "blocks": [{"min": lo, "max": hi}]}
-    scene = Scene.from_dict(config)
-    x = scene.initial_positions()
-    assert len(x) >= n, (len(x), n)
-    return scene, x[:n]
+    return config
 
 
 def time_case(backend, n, dim, search, local_size, steps_per_submit, min_steps, min_seconds, device=None,
