@@ -185,8 +185,9 @@ def merged(scene, ranks):
     in rank order), as one rank takes them: a rank samples what lies in its slab, the time -1 where it took nothing
     (sample_gauges.comp). A point's sample is the one rank's whose slab holds it; a height's, the highest rank's
     that found the surface (value y 1: the slabs go up the line in rank order where it runs along their axis, and
-    lie beside it where not), else 0 (at the time of a rank's that took it). SimulationError where no rank took a
-    sample."""
+    lie beside it where not), else 0 (at the time of a rank's that took it). A force or moment is the sum of the
+    ranks' (each of its slab's rows), added in rank order in the buffers' precision: one rank's sum split in
+    runs and reassociated, so within rounding of it, not its bits. SimulationError where no rank took a sample."""
     out = []
     for g, gauge in enumerate(scene.config["gauges"]):
         counts = {len(samples[g]) for samples in ranks}
@@ -202,7 +203,14 @@ def merged(scene, ranks):
             found = took & (rows[:, :, 2] == 1)
             highest = len(ranks) - 1 - np.argmax(found[::-1], axis=0)
             pick = np.where(found.any(axis=0), highest, pick)
-        out.append(rows[pick, np.arange(rows.shape[1])])
+        taken = rows[pick, np.arange(rows.shape[1])]
+        if gauge["quantity"] in ON_BODY:
+            real = np.float64 if scene["physics.precision"] == "float64" else np.float32
+            total = rows[0, :, 1:].astype(real)
+            for values in rows[1:, :, 1:]:
+                total = total + values.astype(real)
+            taken[:, 1:] = total
+        out.append(taken)
     return out
 
 

@@ -19,10 +19,11 @@ a rank holds them in. A step:
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
-a checkpoint resumes on one rank (`sphcore run --resume`). A gauge samples on every rank what lies in its slab
-(sample_gauges.comp); rank 0 takes each sample from the rank that holds it (gauges.merged) and writes
-RUN/gauges/*.csv as one rank does (force and moment gauges are refused). At a snapshot each rank checks its own
-particles, the energy summed over the ranks. SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
+a checkpoint resumes on any number of ranks (`sphcore run --resume`; Rank.restore). A gauge samples on every rank
+what lies in its slab (sample_gauges.comp); rank 0 takes each sample from the rank that holds it (gauges.merged;
+a force or moment: the sum of the ranks', within rounding of one rank's) and writes RUN/gauges/*.csv as one rank
+does. At a snapshot each rank checks its own particles, the energy summed over the ranks. SIGINT or SIGTERM on any
+rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
 
@@ -66,8 +67,6 @@ def check(scene, backend):
     """Refuse (SceneError, one line) what this slice does not decompose yet."""
     refused = [("physics.pressure_solver", scene["physics.pressure_solver"] != "state_equation",
                 "DFSPH (its solves iterate over all ranks' particles)"),
-               ("gauges", any(g["quantity"] in gauges.ON_BODY for g in scene.config.get("gauges", [])),
-                "force and moment gauges (their sums run over every rank's particles in the buffers' order)"),
                ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)")]
     for key, bad, what in refused:
         if bad:

@@ -22,7 +22,8 @@
 // there, and of a height's line the points there and each one's point below (the halo reaches that far:
 // decomposition.halo_width), the surface found only between a point there and the one below. Its value y says
 // whether it found one (height); a rank that sampled nothing writes the time -1. sphcore.gauges.merged takes each
-// sample from the ranks' rows: the bits of one rank's.
+// sample from the ranks' rows: the bits of one rank's. A force or moment sums over the rows of the rank's slab, and
+// merged adds the ranks' sums (not one rank's bits: the sum is split where the cuts fall).
 // Mirror: sphcore/sph/sample_gauges.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -162,7 +163,13 @@ void main() {
     if (kind.x >= FORCE) {
         real3 force = real3(0.0);
         precise real3 moment = real3(0.0);  // (precise: r x a not contracted to fused multiply-adds, as the mirror)
-        for (uint i = 0u; i < P.n; ++i) {
+        uint first = 0u;  // (on a rank, the rows the sort gave its slab's cells: its share of the sum)
+        uint end = P.n;
+        if (P.owned_end > 0u) {
+            first = cell_start[P.owned_first];
+            end = P.owned_end < P.cell_total ? cell_start[P.owned_end] : P.n;
+        }
+        for (uint i = first; i < end; ++i) {
             if (particle_id[i] - kind.y >= kind.z) continue;  // (not the body's: unsigned, below first too)
             real3 a = particle_a[i].xyz;
             real3 r = particle_x[i].xyz - aux;

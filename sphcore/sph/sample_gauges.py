@@ -3,7 +3,8 @@ time of the step's start): a sample at the first step at or past each multiple o
 velocity, density: Shepard-normalised SPH interpolation at a point over the fluid within h (DualSPHysics'
 MeasureTool, GaugeVel), no mirror images; height: where the mass sum along the vertical line falls below
 rho_0 / 2 (DualSPHysics' GaugeSwl); force, moment: m sum a over a body's particles, in buffer order. On a rank
-of sphcore.parallel, what lies in its slab: a sample it took nothing of has the time -1 (the shader says more).
+of sphcore.parallel, what lies in its slab (a force: the sum over its slab's rows); a sample it took nothing of
+has the time -1 (the shader says more).
 
 Mirror of shaders/sph/sample_gauges.comp: same names, same statement order, same step labels. A GLSL vec3
 local `v` is `v_x, v_y, v_z` here; the time's float32 arithmetic is numba's float32, as the shader's.
@@ -155,7 +156,12 @@ def sample_gauges(spec, real=np.float32):
         if quantity >= FORCE:
             force_x = force_y = force_z = real(0.0)
             moment_x = moment_y = moment_z = real(0.0)
-            for i in range(int(P.n)):
+            first = 0  # (on a rank, the rows the sort gave its slab's cells: its share of the sum)
+            end = int(P.n)
+            if P.owned_end > 0:
+                first = int(cell_start[P.owned_first])
+                end = int(cell_start[P.owned_end]) if P.owned_end < P.cell_total else int(P.n)
+            for i in range(first, end):
                 if (int(particle_id[i]) - body_first) & 0xFFFFFFFF >= body_count:
                     continue  # (not the body's: unsigned, below first too)
                 a_x, a_y, a_z = particle_a[i, 0], particle_a[i, 1], particle_a[i, 2]
