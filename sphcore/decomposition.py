@@ -16,9 +16,8 @@ Wall images need nothing more: a particle's image across a wall is farther from 
 particle itself. With bodies a step reads a third level: a wall particle within h of an owned one gets its pressure
 and velocity (wall_pressure, Adami et al. 2012) from the fluid within h of it, whose densities and pressures are
 their own neighbours' sums (with continuity from those neighbours' positions, velocities and densities, a wall
-particle's among them: state, as its owner wrote it the step before). A height
-gauge's line takes the point below each of its points in the slab, half a spacing past the cut at most: the halo
-reaches that much farther.
+particle's among them: state, as its owner wrote it the step before). A height gauge's line takes the point below
+each of its points in the slab, half a spacing past the cut at most: the halo reaches that much farther.
 """
 import math
 import os

@@ -533,11 +533,11 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
     rank's particles checked first (Rank.check); a checkpoint at the start, every time.checkpoint_every steps, at
     the end and where SIGINT or SIGTERM stops the run (on any rank: every rank stops at that step, Stopped), and
     final.npz, gathered on rank 0's host in particle-id order, checked there and written into `out_dir`. With
-    `checkpoint` (load_checkpoint's arrays of the run in `out_dir`, on any number of ranks) the run continues from
-    it (Rank.restore), on any number of ranks; one rank continues it as well (sphcore.resume). Return the final
-    arrays on rank 0, None on the others. On
-    Vulkan each rank runs on `device` (an index or part of a name), by default its host's rank-th GPU
-    (rank_device)."""
+    `checkpoint` (load_checkpoint's arrays of the run in `out_dir`, written on any number of ranks) the run
+    continues from it (Rank.restore), its particles' arrays dropped from the mapping once loaded (each rank keeps
+    its share alone); one rank continues it as well (sphcore.resume). Return the final arrays on rank 0, None on
+    the others. On Vulkan each rank runs on `device` (an index or part of a name), by default its host's rank-th
+    GPU (rank_device)."""
     comm = comm or world()
     check(scene, backend)
     options = {"local_size": local_size}
@@ -568,10 +568,14 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                 print(f"{scene['name']}: {rank.size} ranks, the halo through "
                       f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
 
+            resumed, taken = None, None
             if checkpoint is not None:
                 rank.gather()  # (the initial state's energy: the bound, checked against the checkpoint's)
                 rank.restore(checkpoint)
-            taken = checkpoint["gauge_state"][1::2, 1] if checkpoint is not None and sim.gauges is not None else None
+                for name in LOADED:
+                    del checkpoint[f"buffer_{name}"]
+                resumed = int(checkpoint["step"])
+                taken = checkpoint["gauge_state"][1::2, 1] if "gauge_state" in checkpoint else None
             files = GaugeFiles(run_folder, scene, taken) if root and sim.gauges is not None else None
 
             def write_gauges():  # (every rank: the samples gathered; before a checkpoint, which counts them)
@@ -613,7 +617,7 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
                         snapshot()
                     if due and root:
                         run_folder.savez(CHECKPOINT, **rank.checkpoint)
-            if sim.step_count == int(checkpoint["step"] if checkpoint is not None else -1):
+            if sim.step_count == resumed:
                 rank.gather()  # (resumed and no step to run: the final arrays of the checkpoint's state)
             rank.close()
             if stopped and not schedule.done(sim, t):
