@@ -16,7 +16,6 @@ are measured against), and one with id_order (the grid's cells in id order, as t
 JSON line to --out (and prints it).
 """
 import argparse
-import json
 import platform
 import sys
 import time
@@ -28,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import sphcore  # noqa: E402
 from sphcore import parallel  # noqa: E402
-from steps_per_second import make_case  # noqa: E402
+from steps_per_second import append_line, make_case  # noqa: E402
 
 PARTS = parallel.PARTS
 HOST = ("exchange",)  # the part that moves particles through host memory (the next four are its parts)
@@ -98,12 +97,7 @@ def main():
                 sim.step(args.steps)
                 sim.backend.read_buffer("grid_status")  # (a sync: a read of a few words, not of every particle)
                 result[key] = 1e3 * (time.perf_counter() - start) / args.steps
-    line = json.dumps(result)
-    print(line, flush=True)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.out, "a") as f:
-            f.write(line + "\n")
+    append_line(result, args.out)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from steps_per_second import case_config  # noqa: E402
+from steps_per_second import append_line, case_config  # noqa: E402
 
 
 def toml(config):
@@ -78,12 +78,7 @@ def main():
             break
     result["files"] = {f.name: f.stat().st_size for f in sorted(args.run_dir.iterdir())} if args.run_dir.exists() else {}
     result["host_memory_gib"] = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
-    line = json.dumps(result)
-    print(line, flush=True)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.out, "a") as f:
-            f.write(line + "\n")
+    append_line(result, args.out)
 
 
 if __name__ == "__main__":

@@ -53,6 +53,16 @@ def precisions(text):
 DROP_M = 10.0  # free fall before the floor: 1.43 s = 14000 steps of dt = 1e-4 s
 
 
+def append_line(result, out):
+    """Print `result` as one JSON line and append it to the file `out` (a Path, or None: printed only)."""
+    line = json.dumps(result)
+    print(line, flush=True)
+    if out:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with open(out, "a") as f:
+            f.write(line + "\n")
+
+
 def make_case(n, dim=2, search="all_pairs", spacing=0.01, list_skin=0.0, room=2.0, shape=None):
     """(scene, positions) for exactly n particles: see the module docstring. 3D: the box `room` blocks long; `shape`
     (3D): the block's lattice points along each axis in place of a cube's (n their product)."""
