@@ -476,8 +476,10 @@ def local_cluster(workers):
 
     threads = str(max(1, (os.cpu_count() or 1) // workers))
     env = {"NUMBA_NUM_THREADS": threads, "OMP_NUM_THREADS": threads, "OMP_WAIT_POLICY": "passive"}
+    # silence_logs: not the nanny's warnings when it stops a worker, nor a worker's error (with a traceback) when
+    # the scheduler closed before its last heartbeat, as after a Ctrl-C (a point's own error reaches its future)
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, env=env,
-                        silence_logs=logging.ERROR)  # not the nanny's warnings when it stops a worker
+                        silence_logs=logging.CRITICAL)
 
 
 def connect(scheduler, workers, timeout=10):
