@@ -554,16 +554,14 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             run_folder.prepare(scene["name"], resume=checkpoint is not None, overwrite=overwrite)
             if checkpoint is None:
                 run_folder.write_bytes("scene.json", scene.to_json().encode())
-            if scene["bodies"] and checkpoint is None:  # the bodies' wall particles: fixed, written once
-                walls, body = wall_particles(scene)
-                run_folder.write_bytes("walls.vtp", vtp_bytes(walls.astype(buffer_dtype(
-                    "particle_x", scene["physics.precision"])), {"body": body}))
             series = SnapshotSeries(out_dir, scene["name"], folder=run_folder)
             if checkpoint is not None:
                 series.truncate(int(checkpoint["step"]))  # (snapshots past the checkpoint: of steps to run again)
         cuts, keep = share(scene, comm.Get_size(), comm.Get_rank(), buffer_dtype("particle_x", scene["physics.precision"]))
         with Simulation(scene, backend, id_order=True, keep=keep, poll=signals.poll, **options) as sim:
             rank = Rank(sim, comm, cuts)
+            if root and scene["bodies"] and checkpoint is None:  # the bodies' wall particles: fixed, written once
+                run_folder.write_bytes("walls.vtp", vtp_bytes(sim.walls["particle_x"], {"body": sim.walls["body"]}))
             if root and progress:
                 print(f"{scene['name']}: {rank.size} ranks, the halo through "
                       f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
