@@ -46,6 +46,8 @@ def main():
     ap.add_argument("--plain", action="store_true", help="1 rank: also time a plain Simulation of the scene")
     ap.add_argument("--room", type=float, default=2.0, help="the box's length in blocks (1.6 keeps 200 M particles' grid "
                     "under params.MAX_CELLS)")
+    ap.add_argument("--profile", action="store_true", help="then --steps more steps with every stage timed (Vulkan: GPU "
+                    "timestamps; the exchange's pick_rows too), each rank's stages in the JSON line (profile)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
     comm = MPI.COMM_WORLD
@@ -73,10 +75,19 @@ def main():
             held += sim.n
         comm.Barrier()
         seconds = time.perf_counter() - start
+        if args.profile:
+            from sphcore.profile import Profile
+            sim.backend.profile = Profile()
+            for _ in range(args.steps):
+                rank.step()
+            sim.backend.profile.steps = args.steps
+            stages = {r["stage"]: r["ms_per_step"] for r in sim.backend.profile.rows()}
         rank.close()
         first, end = rank.owned_rows()
         row = {"rank": rank_number, "device": sim.device_name, "owned": int(end - first),
                "held_mean": held / args.steps, "exchange": "shared memory" if rank.shared else "alltoallv", **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
+        if args.profile:
+            row["profile_ms"] = stages
         n = sim.fluid_count
     rows = comm.gather(row, root=0)
     if rank_number != 0:

@@ -511,11 +511,12 @@ class VulkanBackend:
         self._submit(self._recording(1, [stage]))
 
     def run_stages(self, stages):
-        """`stages` in order, in one submission (recorded once, as a step is)."""
+        """`stages` in order, in one submission (recorded once, as a step is); timed stage by stage where there is a
+        profile."""
         stages = [s if isinstance(s, Stage) else Stage(s) for s in stages]
         for stage in stages:
             self._pipeline(stage.name)
-        self._submit(self._recording(1, stages))
+        self._submit(self._recording(1, stages, timed=self.profile is not None))
 
     def resize(self, params):
         """Hold `params`' count of particles in place: the buffers keep their size while the count fits (the

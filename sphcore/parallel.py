@@ -7,11 +7,11 @@ orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell ru
 a rank holds them in. A step:
   [1] the cuts: each rank's owned particles per cell layer (from the rows the last sort gave each layer), summed
       over the ranks (Allreduce, their total checked) and balanced, each cut moved a layer at most;
-  [2] to every other rank, the owned rows of the cell layers near its slab: of those it may own at the next step
-      (migration: every buffer of a particle), of those it may see (halo: the buffers a step reads of a neighbour,
-      HALO) (decomposition.bands: whole layers, so runs of rows), read back in one copy, through host memory:
-      on one host the ranks' shared memory (Shared: on Vulkan each device copies into and out of it), else one
-      Alltoallv of bytes (nothing pickled, nothing picked on the host);
+  [2] to every other rank, of the owned rows of the cell layers near its slab (decomposition.bands), those now in
+      its slab (migration: what a step reads of a particle) and those within the halo's width of it (halo: what a
+      step reads of a neighbour, HALO), picked and packed on the device (pick_rows.comp), read back in one copy,
+      through host memory: on one host the ranks' shared memory (Shared: on Vulkan each device copies into and out
+      of it), else one Alltoallv of bytes (nothing pickled, nothing picked on the host);
   [3] the received ones written over the old halo's rows;
   [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
@@ -47,9 +47,10 @@ from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
 from sphcore.gauges import GAUGE_SLOTS, GaugeFiles
 from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
-from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, buffer_dtype, in_particle_order
+from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, PICK_ENTRIES, buffer_dtype, in_particle_order
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
+from sphcore.stage import Stage
 from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.stepper import LOADED, Simulation, wall_particles
 from sphcore.vk_runner import Context
@@ -103,12 +104,20 @@ class Stopped(Interrupted):
 # What a halo particle sends: what a step reads of a neighbour before writing it. compute_density and compute_forces
 # read a neighbour's position, velocity, density (state with continuity) and id (the bodies' wall particles), and its
 # pressure, which compute_density writes for every row first; a row's acceleration (compute_forces writes it, the
-# sort's Verlet gather uses it as scratch), Verlet's particle_vh and DFSPH's particle_kappa are read by that row's
-# own stages only (integrate: a halo row's result is not kept). What a particle the receiver may own sends: every
-# LOADED buffer but those two a step writes before it reads them (60 of 80 bytes).
+# sort's Verlet gather uses it as scratch) is read by that row's own stages only (integrate: a halo row's result is
+# not kept). What a particle the receiver owns from now on (a migrant) sends: those, and Verlet's particle_vh (never
+# written without Verlet: zero in every row); DFSPH's particle_kappa (zero without DFSPH, which a run on several
+# ranks refuses: check) and the two a step writes before it reads them, particle_a and particle_p, stay.
+# pick_rows.comp packs them into the sort's scratch buffers (PACKED), Verlet's particle_vh into particle_a.
 HALO = ("particle_x", "particle_v", "particle_rho", "particle_id")
-MIGRANT = tuple(name for name in LOADED if name not in ("particle_a", "particle_p"))
-RUNS = (MIGRANT, HALO, HALO)  # the buffers of the rows sent a rank: those it may own, those below and above them
+PACKED = {"particle_x": "scratch_x", "particle_v": "scratch_v", "particle_rho": "scratch_rho",
+          "particle_id": "scratch_id", "particle_vh": "particle_a"}
+
+
+def sent_buffers(spec):
+    """The buffers of the rows sent a rank: (those it owns from now on, those of its halo)."""
+    return (HALO + ("particle_vh",) if spec.VERLET else HALO), HALO
+
 
 # The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the rows read
 # back, the Alltoallv or the shared memory's barrier, the rows written), the stages, the dt.
@@ -223,7 +232,8 @@ class Rank:
                                                               self.slabs.per_layer, self.slabs.reach)
         precision = sim.scene["physics.precision"]
         self.row_bytes = {name: buffer_dtype(name, precision).itemsize * BUFFERS[name][1] for name in LOADED}
-        self.run_bytes = np.array([sum(self.row_bytes[name] for name in names) for names in RUNS])
+        self.sent = sent_buffers(sim.scene.spec)
+        self.run_bytes = np.array([sum(self.row_bytes[name] for name in names) for names in self.sent])
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
         self.start_owned = self.held_owned()  # (the start's snapshot)
@@ -317,10 +327,9 @@ class Rank:
     def exchange(self):
         """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
         checked: none lost, none twice) and the new cuts, each moved a layer at most; to each other rank the rows
-        of the layers of this one's slab it may own at the next step (the MIGRANT buffers) or see as halo (the
-        HALO buffers) (decomposition.bands: runs of rows, as the sort ordered the cells), read back in one copy
-        into the ranks' shared memory (swap_shared) or sent in one Alltoallv (swap); the received ones replace the
-        old halo, in one copy from each rank's. The owned rows stay where they are:
+        of this one's slab it owns from now on or sees as halo, picked and packed on the device (pick), read back in
+        one copy into the ranks' shared memory (swap_shared) or sent in one Alltoallv (swap); the received ones
+        replace the old halo, in one copy from each rank's. The owned rows stay where they are:
         one that another rank owns now stays a step, farther than the halo's width from every particle this rank
         owns (its halo rows are replaced at the next step); the sort puts every cell in id order whatever the rows
         (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
@@ -336,10 +345,8 @@ class Rank:
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
         cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
         start = self.lap("counts", start)
-        # [2] each other rank's runs of rows: (names, first row, end row), read back one after the other, and sent
-        runs = [[] if q == r else self.runs(cuts, q) for q in range(self.size)]
-        regions = [(name, a, b) for q_runs in runs for names, a, b in q_runs for name in names]
-        rows = np.array([[b - a for _, a, b in q_runs] or [0] * len(RUNS) for q_runs in runs], np.int64)
+        # [2] the rows each other rank needs, picked and packed on the device, read back and sent
+        regions, rows = self.pick(cuts)
         received_rows, sources, start = self.swap_shared(regions, rows, start) if self.shared else \
             self.swap(regions, rows, start)
         # [3] the new halo in the rows of the old: below the owned rows, then after them
@@ -348,11 +355,14 @@ class Rank:
             moved = min(first - m, owned)
             backend.move_rows(end - moved, m, moved)
         self.cuts = cuts
-        self.sim.resize(m + owned, self.owned_cells())
+        P = self.sim.params[0]
+        if m + owned != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or \
+                self.sim.scene.spec.LIST_SKIN:  # (a resize costs a wait and three copies: only where something changed;
+            self.sim.resize(m + owned, self.owned_cells())  # with reused lists it has the next step build them)
         at = 0
         for q_rows, (data, offset) in zip(received_rows, sources):
             regions = []
-            for count, names in zip(q_rows, RUNS):
+            for count, names in zip(q_rows, self.sent):
                 for name in names:
                     below = min(max(first - at, 0), count)  # (rows of the halo below the owned ones; the rest after)
                     size = self.row_bytes[name]
@@ -365,9 +375,9 @@ class Rank:
         self.lap("write", start)
 
     def swap(self, regions, rows, start):
-        """Send each rank its rows: `regions` read back (rank by rank, `rows` of each of RUNS for each), the rows
-        every rank sends this one (one Alltoall) and their bytes (one Alltoallv: byte counts are 32-bit, so under
-        2 GiB from one rank to another). Returns the rows received from each rank (ranks x RUNS), and for each rank
+        """Send each rank its rows: `regions` read back (rank by rank, `rows` of migrants and of halo for each), the
+        rows every rank sends this one (one Alltoall) and their bytes (one Alltoallv: byte counts are 32-bit, so under
+        2 GiB from one rank to another). Returns the rows received from each rank (ranks x 2), and for each rank
         where its bytes are (host memory, the offset there), and the time."""
         from mpi4py import MPI
         sent = self.sim.backend.read_regions(regions)
@@ -403,11 +413,48 @@ class Rank:
         if self.shared:
             self.shared.close()
 
-    def runs(self, cuts, q):
-        """The runs of rows this rank sends rank q for the next step, under the new `cuts`: (names, first row,
-        end row) of decomposition.bands' full range (MIGRANT) and halo ranges (HALO), as RUNS names them."""
-        full, halo = decomposition.bands(self.cuts, cuts, self.rank, q, self.reach)
-        return [(names, self.starts[a], self.starts[b]) for names, (a, b) in zip(RUNS, [full, *halo])]
+    def pick(self, cuts):
+        """The rows each other rank needs for the next step, under the new `cuts`, picked and packed on the device
+        (pick_rows.comp): of the rows the last sort gave the layers near its slab (decomposition.bands), those now
+        in its slab (its own from now on) and those within the halo's width of it. Returns the regions to read back
+        (name, first row, end row) rank by rank, the migrants' then the halo's (as swap takes them), and the rows
+        of each (ranks x 2)."""
+        backend, slabs = self.sim.backend, self.slabs
+        entries = []
+        for q in range(self.size):
+            _, (below, above) = decomposition.bands(self.cuts, cuts, self.rank, q, self.reach)
+            first, end = int(self.starts[below[0]]), int(self.starts[above[1]])
+            if q != self.rank and end > first:
+                entries.append((q, first, end))
+        if len(entries) > PICK_ENTRIES:
+            raise SimulationError(f"step {self.sim.step_count}: rank {self.rank} would send rows to {len(entries)} "
+                                  f"ranks, more than {PICK_ENTRIES}: run on fewer ranks")
+        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
+        bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
+        table[0, 0], slot = len(entries), 0
+        for e, (q, first, end) in enumerate(entries):
+            lo, hi = (slabs.box_min + cuts[k] * slabs.cell_size for k in (q, q + 1))
+            table[1 + 2 * e] = first, end, cuts[q], cuts[q + 1]
+            table[2 + 2 * e] = slot, end - first, 0, 0
+            bounds[e, :2] = (lo - slabs.width if q > 0 else -np.inf), (hi + slabs.width if q < self.size - 1 else np.inf)
+            slot += end - first
+        if not entries:
+            return [], np.zeros((self.size, 2), np.int64)
+        if slot > self.sim.n:  # (rows several ranks need, each packed once for each: room for all)
+            self.sim.resize(slot, self.owned_cells())
+        data = np.concatenate([a.view(np.uint8).reshape(-1) for a in (table, bounds, np.zeros(2 * PICK_ENTRIES,
+                                                                                               np.uint32))])
+        backend.write_regions(data, [("pick_table", 0, 0, len(table)), ("pick_bounds", 0, table.nbytes, PICK_ENTRIES),
+                                     ("pick_count", 0, table.nbytes + bounds.nbytes, 2 * PICK_ENTRIES)])
+        backend.run_stages([Stage("pick_rows")])
+        counts = backend.read_rows("pick_count", 0, 2 * len(entries)).reshape(-1, 2).astype(np.int64)
+        regions, rows = [], np.zeros((self.size, 2), np.int64)
+        for (q, first, end), (migrants, halo), e in zip(entries, counts, range(len(entries))):
+            base, top = int(table[2 + 2 * e, 0]), int(table[2 + 2 * e, 0]) + end - first
+            regions += [(PACKED[name], base, base + migrants) for name in self.sent[0]]
+            regions += [(PACKED[name], top - halo, top) for name in self.sent[1]]
+            rows[q] = migrants, halo
+        return regions, rows
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""

@@ -23,6 +23,7 @@ from sphcore.sph.dfsph_velocity import dfsph_velocity
 from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
 from sphcore.sph.integrate_density import integrate_density
+from sphcore.sph.pick_rows import pick_rows
 from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.sample_gauges import sample_gauges
@@ -31,6 +32,7 @@ from sphcore.sph.sort_cells import sort_cells
 from sphcore.sph.wall_pressure import wall_pressure
 from sphcore.stage import ALWAYS, BUILD, REUSE, Stage  # noqa: F401 (sphcore.plan.ALWAYS)
 
+PICK_ENTRIES = 32  # the ranks one rank's exchange sends rows to, at most (pick_rows.comp)
 REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the precision says
 PRECISIONS = ("float32", "float64")
 
@@ -72,6 +74,9 @@ BUFFERS = {
     "gauge_table": (np.float32, 4, "gauge_rows"),
     "gauge_state": (np.uint32, 4, "gauge_rows"),
     "gauge_samples": (REAL, 4, "gauge_samples"),
+    "pick_table": (np.uint32, 4, 1 + 2 * PICK_ENTRIES),
+    "pick_bounds": (np.float32, 4, PICK_ENTRIES),
+    "pick_count": (np.uint32, 1, 2 * PICK_ENTRIES),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -100,6 +105,10 @@ BUFFERS = {
 # (the next multiple of the interval, samples taken); gauge_samples: GAUGE_SLOTS rows (time, value x, y, z) a gauge,
 # a ring the host reads before it can fill ("gauge_rows": 2 per gauge, "gauge_samples": GAUGE_SLOTS per gauge; at
 # least 1 gauge's: a state without gauges has a gauge_state of zeros, which sample_gauges skips).
+# pick_table, pick_bounds, pick_count: a rank's exchange (sphcore.parallel; shaders/sph/pick_rows.comp): the number of
+# entries, then two rows an entry (another rank): the rows it may need (first, end) and its slab's layers (first,
+# end), then its first slot and slots; the slab widened by the halo's width (lowest, highest coordinate); the
+# migrants and the halo rows picked for it.
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
 # spec.OBSTACLES pairs are read (float32, like the parameter block's walls).
 STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
@@ -156,6 +165,9 @@ STAGES = {
     "sample_gauges": (sample_gauges, "gauges", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                 "particle_p", "particle_id", "cell_pyramid", "cell_start",
                                                 "time_state", "gauge_table", "gauge_state", "gauge_samples")),
+    "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
+                                           "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "particle_a",
+                                           "pick_table", "pick_bounds", "pick_count")),
 }
 
 def neighbour_stages(cell_total):

@@ -213,6 +213,60 @@ def test_load_on_numba_reuses_its_arrays():
 
 
 @pytest.mark.vulkan
+@pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
+def test_pick_rows_packs_what_each_rank_needs(backend):
+    """pick_rows.comp (a rank's exchange): for each entry, of its rows, those whose layer lies in its slab are
+    packed from its first slot up (every buffer a migrant sends), those within its bounds from its last slot down;
+    entries whose rows overlap each get their copy. Against numpy on the rows read back, bit for bit."""
+    if backend == "vulkan":
+        from conftest import vulkan_or_skip
+        vulkan_or_skip()
+    from sphcore.parallel import PACKED, sent_buffers
+    from sphcore.plan import PICK_ENTRIES
+    from sphcore.stage import Stage
+    scene = sphcore.Scene.from_dict(small_dam_break())
+    with sphcore.Simulation(scene, backend, id_order=True) as sim:
+        sim.step(30)
+        n, b = sim.n, sim.backend
+        x = b.read_rows("particle_x", 0, n)
+        P = sim.params[0]
+        layer = decomposition.layers_of(x[:, 1], P["box_min"][1], P["inv_cell"], int(P["grid_dim"][1]))
+        # (rows, slab's layers, bounds): overlapping rows, an open bound either side, a slab with no particle
+        entries = [((0, n), (3, 5), (0.02, 0.16)), ((40, n - 30), (6, 7), (-np.inf, 0.3)),
+                   ((0, n // 2), (0, 1), (0.11, np.inf)), ((5, 200), (40, 41), (0.3, 0.45))]
+        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
+        bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
+        table[0, 0], slot = len(entries), 0
+        for e, ((first, end), (lo, hi), (low, high)) in enumerate(entries):
+            table[1 + 2 * e], table[2 + 2 * e], bounds[e, :2] = (first, end, lo, hi), (slot, end - first, 0, 0), (low, high)
+            slot += end - first
+        assert slot > n
+        sim.resize(slot)  # (room for each entry's copy; rows past n are in no entry's range)
+        b.write_buffer("pick_table", table)
+        b.write_buffer("pick_bounds", bounds)
+        b.write_buffer("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))
+        b.run_stages([Stage("pick_rows")])
+        counts = b.read_buffer("pick_count").reshape(-1, 2)
+        held = {name: b.read_rows(name, 0, n) for name in PACKED}
+        packed = {name: b.read_rows(PACKED[name], 0, slot) for name in PACKED}
+        migrant_buffers, halo_buffers = sent_buffers(scene.spec)
+        assert "particle_vh" in migrant_buffers  # (Verlet)
+        for e, ((first, end), (lo, hi), (low, high)) in enumerate(entries):
+            rows = np.arange(first, end)
+            mine = (layer[rows] >= lo) & (layer[rows] < hi)
+            near = ~mine & (x[rows, 1] >= np.float32(low)) & (x[rows, 1] < np.float32(high))
+            base, top = int(table[2 + 2 * e, 0]), int(table[2 + 2 * e, 0]) + end - first
+            assert counts[e].tolist() == [mine.sum(), near.sum()], e
+            assert 0 < near.sum() and (0 < mine.sum() or e == 3)
+            for picked, slots, names in ((rows[mine], np.arange(base, base + mine.sum()), migrant_buffers),
+                                         (rows[near], np.arange(top - near.sum(), top), halo_buffers)):
+                slots = slots[np.argsort(packed["particle_id"][slots])]  # (in id order: the slots' is the scheduler's)
+                picked = picked[np.argsort(held["particle_id"][picked])]
+                assert np.array_equal(packed["particle_id"][slots], held["particle_id"][picked])
+                for name in names:
+                    assert np.array_equal(packed[name][slots], held[name][picked]), (e, name)
+
+
 def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
     """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_entries, read_regions,
     write_regions): a resize keeps

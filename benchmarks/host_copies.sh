@@ -1,0 +1,15 @@
+#!/bin/bash
+# benchmarks/host_copies.py on 1 and on every GPU of a host at once (rank r on GPU r, the system Open MPI as
+# benchmarks/parallel_gpu.sh), with the folders .gl and .whl carried; results: $OUT/host_copies.json (a line a run).
+set -u -o pipefail
+OUT=${OUT:-benchmarks/results/parallel_gpu}
+. benchmarks/gpu_env.sh
+PY=$(which python3)
+mkdir -p "$OUT"
+GPUS=$(nvidia-smi --query-gpu=name --format=csv,noheader | wc -l)
+for n in 1 "$GPUS"; do
+    timeout 200 /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$n" -x PYTHONPATH -x VK_DRIVER_FILES \
+        -x PYTHONUNBUFFERED bash -c 'CUDA_VISIBLE_DEVICES=$OMPI_COMM_WORLD_LOCAL_RANK exec "$0" "$@"' \
+        "$PY" benchmarks/host_copies.py "${MIB:-84}" "$OUT/host_copies.json" 2>&1 | grep -v "^ *$"
+done
+nvidia-smi topo -m
