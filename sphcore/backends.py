@@ -234,6 +234,11 @@ class NumbaBackend:
             rows = self.state[name][row:row + count]
             rows.view(np.uint8).reshape(-1)[...] = data[offset:offset + rows.nbytes]
 
+    def write_parts(self, parts):
+        """write_regions of each (data, regions) of `parts`."""
+        for data, regions in parts:
+            self.write_regions(data, regions)
+
     def read_entries(self, name, indices):
         """The entries `indices` of a one-component buffer."""
         return self.state[name][np.asarray(indices, np.int64)].copy()
@@ -614,12 +619,20 @@ class VulkanBackend:
     def write_regions(self, data, regions):
         """Set rows of buffers to bytes of `data` (uint8, or host_buffer's): for each (name, row, offset, count) of
         `regions`, `count` rows from `row` on to the bytes from `offset` on; in one submission."""
-        copies = []
-        for name, row, offset, count in regions:
-            size = self._row_bytes(name)
-            copies.append((self.buffers[name], offset, row * size, count * size))
-            self._known.pop(name, None)
-        self.ctx.write_regions(data, copies)
+        self.write_parts([(data, regions)])
+
+    def write_parts(self, parts):
+        """write_regions of each (data, regions) of `parts`, in one submission: each `data` host_buffer's, or one
+        host array (uint8) for them all."""
+        copied = []
+        for data, regions in parts:
+            copies = []
+            for name, row, offset, count in regions:
+                size = self._row_bytes(name)
+                copies.append((self.buffers[name], offset, row * size, count * size))
+                self._known.pop(name, None)
+            copied.append((data, copies))
+        self.ctx.write_parts(copied)
 
     def read_entries(self, name, indices):
         """The entries `indices` of a one-component buffer, in one copy from the device."""

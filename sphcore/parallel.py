@@ -22,7 +22,8 @@ particle-id order, checked and written there as a 1-rank run writes them (no dev
 a checkpoint resumes on any number of ranks (`sphcore run --resume`; Rank.restore). A gauge samples on every rank
 what lies in its slab (sample_gauges.comp); rank 0 takes each sample from the rank that holds it (gauges.merged;
 a force or moment: the sum of the ranks', within rounding of one rank's) and writes RUN/gauges/*.csv as one rank
-does. At a snapshot each rank checks its own particles, the energy summed over the ranks. SIGINT or SIGTERM on any
+does. At a snapshot each rank checks its own particles, the energy summed over the ranks (a failure more than a
+step after the last good check replayed from it, to name the first bad step). SIGINT or SIGTERM on any
 rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
@@ -240,6 +241,7 @@ class Rank:
         self.starts = None  # (no step yet: the held set is not sorted)
         self.shared = Shared.make(comm, sim.backend)
         self.gauge_rows = []  # (rank 0: the gauges' samples read and not yet taken)
+        self.good = None  # (what this rank held at the last step a check passed: keep, replay)
         sim.resize(sim.n, self.owned_cells())
         walls, body = wall_particles(sim.scene)  # (fixed: every rank knows them all, as health.check_bodies asks)
         sim.walls = {"particle_x": walls.astype(buffer_dtype("particle_x", precision)), "body": body}
@@ -252,6 +254,7 @@ class Rank:
         self.cuts, keep = share(self.sim.scene, self.size, self.rank, x=x[:, :self.sim.dim])
         self.sim.restore(checkpoint, keep, self.owned_cells())
         self.start_owned, self.starts = self.held_owned(), None
+        self.keep()  # (the checkpoint's state, checked when it was written: a replay's start)
 
     def held_owned(self):
         """Of the particles this rank holds at a start, those of its slab (LOADED arrays)."""
@@ -286,7 +289,8 @@ class Rank:
         if self.adaptive:
             self.reduce_dt(MPI)
             start = self.lap("dt", start)
-        backend.run_stages(self.after_dt)
+        if self.after_dt:
+            backend.run_stages(self.after_dt)
         rows = np.arange(self.layers) * self.per_layer
         self.starts = np.append(backend.read_entries("cell_start", rows), self.sim.n).astype(np.int64)
         self.lap("stages", start)
@@ -329,7 +333,7 @@ class Rank:
         checked: none lost, none twice) and the new cuts, each moved a layer at most; to each other rank the rows
         of this one's slab it owns from now on or sees as halo, picked and packed on the device (pick), read back in
         one copy into the ranks' shared memory (swap_shared) or sent in one Alltoallv (swap); the received ones
-        replace the old halo, in one copy from each rank's. The owned rows stay where they are:
+        replace the old halo, in one copy. The owned rows stay where they are:
         one that another rank owns now stays a step, farther than the halo's width from every particle this rank
         owns (its halo rows are replaced at the next step); the sort puts every cell in id order whatever the rows
         (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
@@ -355,13 +359,14 @@ class Rank:
             moved = min(first - m, owned)
             backend.move_rows(end - moved, m, moved)
         self.cuts = cuts
+        # a resize (a wait and three copies) only where the count or the slab changed, or to have reused lists built
         P = self.sim.params[0]
         if m + owned != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or \
-                self.sim.scene.spec.LIST_SKIN:  # (a resize costs a wait and three copies: only where something changed;
-            self.sim.resize(m + owned, self.owned_cells())  # with reused lists it has the next step build them)
-        at = 0
+                self.sim.scene.spec.LIST_SKIN:
+            self.sim.resize(m + owned, self.owned_cells())
+        at, parts = 0, {}  # (every rank's rows in one submission: its memory's regions)
         for q_rows, (data, offset) in zip(received_rows, sources):
-            regions = []
+            regions = parts.setdefault(id(data), (data, []))[1]
             for count, names in zip(q_rows, self.sent):
                 for name in names:
                     below = min(max(first - at, 0), count)  # (rows of the halo below the owned ones; the rest after)
@@ -370,8 +375,7 @@ class Rank:
                                                             count - below)]
                     offset += count * size
                 at += count
-            if any(q_rows):
-                backend.write_regions(data, regions)
+        backend.write_parts(list(parts.values()))
         self.lap("write", start)
 
     def swap(self, regions, rows, start):
@@ -429,6 +433,9 @@ class Rank:
         if len(entries) > PICK_ENTRIES:
             raise SimulationError(f"step {self.sim.step_count}: rank {self.rank} would send rows to {len(entries)} "
                                   f"ranks, more than {PICK_ENTRIES}: run on fewer ranks")
+        rows = np.zeros((self.size, 2), np.int64)
+        if not entries:
+            return [], rows
         table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
         table[0, 0], slot = len(entries), 0
@@ -436,10 +443,8 @@ class Rank:
             lo, hi = (slabs.box_min + cuts[k] * slabs.cell_size for k in (q, q + 1))
             table[1 + 2 * e] = first, end, cuts[q], cuts[q + 1]
             table[2 + 2 * e] = slot, end - first, 0, 0
-            bounds[e, :2] = (lo - slabs.width if q > 0 else -np.inf), (hi + slabs.width if q < self.size - 1 else np.inf)
+            bounds[e, :2] = lo - slabs.width if q > 0 else -np.inf, hi + slabs.width if q < self.size - 1 else np.inf
             slot += end - first
-        if not entries:
-            return [], np.zeros((self.size, 2), np.int64)
         if slot > self.sim.n:  # (rows several ranks need, each packed once for each: room for all)
             self.sim.resize(slot, self.owned_cells())
         data = np.concatenate([a.view(np.uint8).reshape(-1) for a in (table, bounds, np.zeros(2 * PICK_ENTRIES,
@@ -448,9 +453,10 @@ class Rank:
                                      ("pick_count", 0, table.nbytes + bounds.nbytes, 2 * PICK_ENTRIES)])
         backend.run_stages([Stage("pick_rows")])
         counts = backend.read_rows("pick_count", 0, 2 * len(entries)).reshape(-1, 2).astype(np.int64)
-        regions, rows = [], np.zeros((self.size, 2), np.int64)
-        for (q, first, end), (migrants, halo), e in zip(entries, counts, range(len(entries))):
-            base, top = int(table[2 + 2 * e, 0]), int(table[2 + 2 * e, 0]) + end - first
+        regions = []
+        for e, ((q, first, end), (migrants, halo)) in enumerate(zip(entries, counts)):
+            base = int(table[2 + 2 * e, 0])
+            top = base + end - first
             regions += [(PACKED[name], base, base + migrants) for name in self.sent[0]]
             regions += [(PACKED[name], top - halo, top) for name in self.sent[1]]
             rows[q] = migrants, halo
@@ -485,26 +491,28 @@ class Rank:
 
     def gather(self):
         """Every rank's owned particles (LOADED) on rank 0's host, each row at its particle id, and every rank's grid
-        status, checked there as read() checks a 1-rank run's (Simulation.checked); rank 0 keeps the arrays of the
-        checkpoint and final.npz of that (`checkpoint`, `final`): those a 1-rank run writes, of every particle in id
-        order. No device holds more than its share. A rank's rows cross as raw buffers (Send), a buffer at a time
+        status, checked there as read() checks a 1-rank run's (Simulation.checked; a failure as settle takes it);
+        rank 0 keeps the arrays of the checkpoint and final.npz of that (`checkpoint`, `final`): those a 1-rank run
+        writes, of every particle in id order. No device holds more than its share. A rank's rows cross as raw buffers (Send), a buffer at a time
         in pieces of PIECE rows (an MPI count is 32-bit), their ids first; the energy bound (the first gather's)
         goes to every rank."""
-        sim, owned = self.sim, self.owned()
+        sim, owned, failure = self.sim, self.owned(), None
         statuses = self.comm.gather(sim.backend.read_buffer("grid_status"), root=0)
         counts = self.comm.gather(len(owned["particle_id"]), root=0)
         if self.rank == 0:
-            self.assemble(owned, statuses, counts)
+            failure = self.assemble(owned, statuses, counts)
         else:
             for name in SENT:
                 for k in range(0, len(owned[name]), PIECE):
                     self.comm.Send(owned[name][k:k + PIECE], dest=0)
+        self.settle(failure, [0] if self.comm.bcast(failure is not None, root=0) else [])
         sim.energy_start = self.comm.bcast(sim.energy_start, root=0)
         sim.checked_step = sim.step_count
 
     def assemble(self, owned, statuses, counts):
         """Rank 0's part of gather: its own particles `owned` and every other rank's (`counts` of them, received),
-        each buffer's rows placed at their ids (every id once: checked), read as a 1-rank run reads them."""
+        each buffer's rows placed at their ids (every id once: checked), read as a 1-rank run reads them. Returns
+        the SimulationError of that read where it fails, else None."""
         sim = self.sim
         if sum(counts) != self.total:
             raise SimulationError(f"step {sim.step_count}: the ranks own {sum(counts)} particles, not {self.total}")
@@ -525,12 +533,16 @@ class Rank:
             raise SimulationError(f"step {sim.step_count}: particle {int(np.argmin(seen))} is owned by no rank (another "
                                   "is owned twice)")
         state = {name: values[:, :sim.dim] if values.ndim == 2 else values for name, values in whole.items()}
-        state = sim.checked(state, statuses)
+        try:
+            state = sim.checked(state, statuses)
+        except SimulationError as failure:
+            return failure
         carried = sim.backend.read([name for name in CARRIED if name not in LOADED])
         carried["control"][CONTROL_REBUILD] = 1  # (a rank's next step builds its lists: every step does)
         carried = {name: whole[name] if name in whole else carried[name] for name in CARRIED}
         params = sim.params_of(self.total)  # (every particle owned: a 1-rank run's)
         self.checkpoint, self.final = sim.checkpoint_of(carried, params), final_arrays(sim, state, params)
+        return None
 
     def received(self, like, count, source):
         """`count` rows of a buffer (`like`'s dtype and row shape) that rank `source` sends (gather)."""
@@ -539,13 +551,12 @@ class Rank:
             self.comm.Recv(rows[k:k + PIECE], source=source)
         return rows
 
-    def check(self):
+    def check(self, replay=True):
         """Check the particles this rank owns, without gathering them, as read() checks a 1-rank run's
         (sphcore.health): every per-particle buffer's owned rows, in id order (a message names a particle by its
         id), this rank's grid status, and the energy bound with the energy summed over the ranks (in rank order)
         and the fastest particle the fastest of theirs (allgather of health.energy_figures). A failure on any
-        rank is raised by the first rank that found one (main prints it and aborts every rank), which the
-        others wait for."""
+        rank as settle takes it (`replay`: from the last good step)."""
         sim, backend = self.sim, self.sim.backend
         first, end = self.owned_rows()
         state = in_particle_order({name: backend.read_rows(name, first, end) for name in PARTICLE_BUFFERS}, sim.dim)
@@ -559,12 +570,43 @@ class Rank:
             health.check_grid(sim, backend.read_buffer("grid_status"))
         except SimulationError as e:
             failure = e
-        failed = [r for r, found in enumerate(self.comm.allgather(failure is not None)) if found]
-        if failed and failed[0] == self.rank:
-            raise failure
-        if failed:
-            self.comm.Barrier()  # (not passed: rank failed[0] aborts every rank)
+        self.settle(failure, [r for r, found in enumerate(self.comm.allgather(failure is not None)) if found], replay)
         sim.checked_step = sim.step_count
+
+    def settle(self, failure, failed, replay=True):
+        """After a check on every rank (collective): `failed` the ranks whose check failed (`failure` this rank's).
+        None: this rank keeps its state (keep). Else, more than a step past the last good state and with `replay`,
+        every rank replays from it (replay: the check of the first step that fails raises, as a 1-rank run's names
+        that step); then the first rank that failed raises its failure, which main prints before it aborts every
+        rank, and the others wait for that."""
+        if not failed:
+            if replay:
+                self.keep()
+            return
+        if replay and self.good is not None and self.sim.step_count - self.good[3] > 1:
+            self.replay()
+        if failed[0] == self.rank:
+            raise failure
+        self.comm.Barrier()  # (not passed: rank failed[0] aborts every rank)
+
+    def keep(self):
+        """Keep what this rank holds at a step a check passed, for replay: every CARRIED buffer of its rows, its
+        cuts and the rows of each layer."""
+        self.good = self.sim.backend.read(CARRIED), self.cuts.copy(), self.starts, self.sim.step_count
+
+    def replay(self):
+        """Every rank back where its last good check left it (keep: its rows loaded again, the cuts, the step), then
+        a step at a time, each checked, up to the step whose check failed: the first that fails raises. The steps
+        are the same bits as the first time (any cuts give one rank's)."""
+        failed_at, (carried, self.cuts, self.starts, step) = self.sim.step_count, self.good
+        self.sim.load({name: carried[name] for name in LOADED}, self.owned_cells())
+        for name in CARRIED:
+            if name not in LOADED:
+                self.sim.backend.write_buffer(name, carried[name])
+        self.sim.step_count = self.sim.checked_step = step
+        while self.sim.step_count < failed_at:
+            self.step()
+            self.check(replay=False)
 
     def stopped(self, signals):
         """The first signal any rank received (sphcore.signals.Signals: `signals`), or 0: every rank stops at the

@@ -238,7 +238,8 @@ def test_pick_rows_packs_what_each_rank_needs(backend):
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
         table[0, 0], slot = len(entries), 0
         for e, ((first, end), (lo, hi), (low, high)) in enumerate(entries):
-            table[1 + 2 * e], table[2 + 2 * e], bounds[e, :2] = (first, end, lo, hi), (slot, end - first, 0, 0), (low, high)
+            table[1 + 2 * e], table[2 + 2 * e] = (first, end, lo, hi), (slot, end - first, 0, 0)
+            bounds[e, :2] = low, high
             slot += end - first
         assert slot > n
         sim.resize(slot)  # (room for each entry's copy; rows past n are in no entry's range)
@@ -798,6 +799,26 @@ def test_a_blow_up_on_two_ranks_is_named_as_on_one(tmp_path):
     steps = [sorted(int(re.search(r"_(\d{7})\.p?vtp", f.name)[1]) for f in (tmp_path / run).glob(pattern))
              for run, pattern in (("one", "*.vtp"), ("two", "*.pvtp"))]
     assert steps[0] == steps[1] == list(range(6))
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_a_blow_up_between_checks_is_replayed_to_its_first_step_on_two_ranks(tmp_path):
+    """The same blow-up with a snapshot every 5 steps: the check at step 10 fails; as a 1-rank run does, the 2 ranks
+    step again from step 5, checking every step, and name step 6 in the same words."""
+    config = small_dam_break()
+    config["time"] = {"dt": 2e-3, "steps": 400, "output_every": 5}
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(config))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    one = subprocess.run([sys.executable, "-m", "sphcore", "run", str(scene_file), "--out", str(tmp_path / "one")],
+                         env=env, capture_output=True, text=True, timeout=900)
+    two = two_ranks(scene_file, tmp_path / "two", env)
+    assert one.returncode == 1 and two.returncode != 0
+    message = one.stderr.split("\r")[-1].strip().splitlines()[-1]
+    assert message.startswith("sphcore: error: blow-up at step 6 ") and "the energy rose" in message, message
+    errors = [line for line in two.stderr.replace("\r", "\n").splitlines() if line.startswith("sphcore: error:")]
+    assert errors == [message.replace("sphcore: error: ", "sphcore: error: rank 0 of 2: ")], two.stderr[-2000:]
+    assert sorted(f.name for f in (tmp_path / "two").glob("*.pvtp")) == [f"{config['name']}_{k:07d}.pvtp" for k in (0, 5)]
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")

@@ -44,7 +44,8 @@ def pick_rows(spec, real=np.float32):
                 k = np.int64(pick_table[2 + 2 * e, 0]) + np.int64(pick_count[2 * e])
                 pick_count[2 * e] += 1
             elif coordinate >= real(pick_bounds[e, 0]) and coordinate < real(pick_bounds[e, 1]):
-                k = np.int64(pick_table[2 + 2 * e, 0]) + np.int64(pick_table[2 + 2 * e, 1]) - 1 - np.int64(pick_count[2 * e + 1])
+                k = (np.int64(pick_table[2 + 2 * e, 0]) + np.int64(pick_table[2 + 2 * e, 1]) - 1
+                     - np.int64(pick_count[2 * e + 1]))
                 pick_count[2 * e + 1] += 1
             else:
                 continue

@@ -671,18 +671,29 @@ class Context:
         """Write bytes of `data` into buffers in one submission, for each (Buffer, the byte offset in `data`, the
         buffer's byte offset, byte count) of `copies`: `data` a Buffer (host_buffer's), or host memory (uint8; best
         space_to_write's)."""
-        copies = [c for c in copies if c[3]]
-        if not copies:
-            return
-        for buffer, _, offset, count in copies:
-            if offset + count > buffer.nbytes:
-                raise ValueError(f"{buffer.name}: {count} bytes at {offset} do not fit in {buffer.nbytes}")
-        source = data
-        if not isinstance(data, Buffer):
-            source = self._staging(data.nbytes, "write_regions", math.inf)
-            if not (len(data) and data.ctypes.data == source.bytes.ctypes.data):
-                source.bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
-        self._copies([(source.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies])
+        self.write_parts([(data, copies)])
+
+    def write_parts(self, parts):
+        """write_regions of each (data, copies) of `parts`, in one submission: each `data` a Buffer, or one host
+        array (uint8) for them all."""
+        commands, staged = [], None
+        for data, copies in parts:
+            copies = [c for c in copies if c[3]]
+            for buffer, _, offset, count in copies:
+                if offset + count > buffer.nbytes:
+                    raise ValueError(f"{buffer.name}: {count} bytes at {offset} do not fit in {buffer.nbytes}")
+            source = data
+            if copies and not isinstance(data, Buffer):
+                if staged is None:
+                    staged = data, self._staging(data.nbytes, "write_regions", math.inf)
+                    if not (len(data) and data.ctypes.data == staged[1].bytes.ctypes.data):
+                        staged[1].bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
+                elif staged[0] is not data:
+                    raise ValueError("write_parts takes one host array for all its parts (else Buffers)")
+                source = staged[1]
+            commands += [(source.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies]
+        if commands:
+            self._copies(commands)
 
     def buffer(self, nbytes, name="buffer", uniform=False):
         return Buffer(self, nbytes, name, uniform)
