@@ -493,9 +493,9 @@ class Rank:
         """Every rank's owned particles (LOADED) on rank 0's host, each row at its particle id, and every rank's grid
         status, checked there as read() checks a 1-rank run's (Simulation.checked; a failure as settle takes it);
         rank 0 keeps the arrays of the checkpoint and final.npz of that (`checkpoint`, `final`): those a 1-rank run
-        writes, of every particle in id order. No device holds more than its share. A rank's rows cross as raw buffers (Send), a buffer at a time
-        in pieces of PIECE rows (an MPI count is 32-bit), their ids first; the energy bound (the first gather's)
-        goes to every rank."""
+        writes, of every particle in id order. No device holds more than its share. A rank's rows cross as raw
+        buffers (Send), a buffer at a time in pieces of PIECE rows (an MPI count is 32-bit), their ids first; the
+        energy bound (the first gather's) goes to every rank."""
         sim, owned, failure = self.sim, self.owned(), None
         statuses = self.comm.gather(sim.backend.read_buffer("grid_status"), root=0)
         counts = self.comm.gather(len(owned["particle_id"]), root=0)
