@@ -494,7 +494,10 @@ def test_a_rank_samples_the_gauges_of_its_slab(backend):
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(small_dam_break_3d())], ids=["2d", "3d"])
+@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(small_dam_break_3d()),
+                                    gauged(small_dam_break(precision="float64")),
+                                    gauged(small_dam_break(list_skin=0.2))],
+                         ids=["2d", "3d", "2d_float64", "2d_list_skin"])
 def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     """`mpiexec -n 2 sphcore run` of a dam break (particles cross the cuts as the column falls) gives bitwise the
     final state and the gauges of the same driver on one rank, and its checkpoint resumes on one rank to the same
