@@ -18,7 +18,7 @@ from steps_per_second import make_case
 
 N = 34 << 20
 scene, _ = make_case(int(sys.argv[1]) if len(sys.argv) > 1 else 8_400_000, dim=3, search="grid")
-sim, transfer = with_transfer_queue(lambda: sphcore.Simulation(scene, "vulkan"))
+sim, transfer = with_transfer_queue(lambda: sphcore.Simulation(scene, "vulkan"), lambda sim: sim.backend.ctx)
 backend, ctx = sim.backend, sim.backend.ctx
 device = ctx.buffer(N, "device")
 host_map = mmap.mmap(-1, N + 4096)

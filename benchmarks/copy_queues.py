@@ -3,9 +3,10 @@ benchmarks/host_copies.py and copy_overlap.py (sphcore's Context has one queue).
 import vulkan as vk
 
 
-def with_transfer_queue(make):
-    """make() (a Context, or what builds one) with vkCreateDevice asking for one more queue, of the first
-    transfer-only family where there is one: (what make returned, (queue, command pool, fence) or None)."""
+def with_transfer_queue(make, context_of=lambda made: made):
+    """make() (a Context, or what builds one: context_of(made) is its Context) with vkCreateDevice asking for one
+    more queue, of the first transfer-only family where there is one: (what make returned, (queue, command pool,
+    fence) or None)."""
     family, create = [], vk.vkCreateDevice
 
     def create_with_transfer(physical, info, allocator):
@@ -27,8 +28,7 @@ def with_transfer_queue(make):
         made = make()
     finally:
         vk.vkCreateDevice = create
-    ctx = getattr(made, "backend", made)
-    ctx = getattr(ctx, "ctx", ctx)
+    ctx = context_of(made)
     if family[0] is None:
         return made, None
     queue = vk.vkGetDeviceQueue(ctx.device, family[0], 0)

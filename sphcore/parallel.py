@@ -231,6 +231,7 @@ class Rank:
         self.slabs = Slabs(sim.scene, sim.params)
         self.axis, self.layers, self.per_layer, self.reach = (self.slabs.axis, self.slabs.layers,
                                                               self.slabs.per_layer, self.slabs.reach)
+        self.layer_cells = np.arange(self.layers) * self.per_layer  # (each layer's first cell: its rows' start)
         precision = sim.scene["physics.precision"]
         self.row_bytes = {name: buffer_dtype(name, precision).itemsize * BUFFERS[name][1] for name in LOADED}
         self.sent = sent_buffers(sim.scene.spec)
@@ -291,8 +292,7 @@ class Rank:
             start = self.lap("dt", start)
         if self.after_dt:
             backend.run_stages(self.after_dt)
-        rows = np.arange(self.layers) * self.per_layer
-        self.starts = np.append(backend.read_entries("cell_start", rows), self.sim.n).astype(np.int64)
+        self.starts = np.append(backend.read_entries("cell_start", self.layer_cells), self.sim.n).astype(np.int64)
         self.lap("stages", start)
         self.sim.step_count += 1
 
