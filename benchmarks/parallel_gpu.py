@@ -1,5 +1,5 @@
-"""The decomposed 3D dam break (sphcore.parallel) on N ranks, one GPU each: ms per step and what the exchange,
-staged through host memory, takes of it. Run under mpiexec (benchmarks/parallel_gpu.sh runs the cases):
+"""The decomposed 3D dam break (sphcore.parallel) on N ranks, one GPU each: ms per step and what the exchange
+(from GPU to GPU, through host memory or MPI messages: SPHCORE_MPI_EXCHANGE, docs/parallel.md) takes of it. Run under mpiexec (benchmarks/parallel_gpu.sh runs the cases):
 
     mpiexec -n 2 python benchmarks/parallel_gpu.py --count 8388608 --out benchmarks/results/parallel_gpu.json
     mpiexec -n 2 python benchmarks/parallel_gpu.py --count 2097152 --per-rank ...   # weak scaling: 2 M a rank
@@ -30,7 +30,8 @@ from sphcore import parallel  # noqa: E402
 from steps_per_second import append_line, make_case  # noqa: E402
 
 PARTS = parallel.PARTS
-HOST = ("exchange",)  # the part that moves particles through host memory (the next four are its parts)
+HOST = ("exchange",)  # the part that moves rows between ranks (the next four are its parts; host_staged_*: its
+# share, named when it went through host memory alone)
 
 
 def main():
@@ -85,7 +86,7 @@ def main():
         rank.close()
         first, end = rank.owned_rows()
         row = {"rank": rank_number, "device": sim.device_name, "owned": int(end - first),
-               "held_mean": held / args.steps, "exchange": "shared memory" if rank.shared else "alltoallv", **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
+               "held_mean": held / args.steps, "exchange": rank.exchange_kind, **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in PARTS}}
         if args.profile:
             row["profile_ms"] = stages
         n = sim.fluid_count

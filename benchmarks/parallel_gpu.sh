@@ -5,6 +5,7 @@
 # $PER_GPU particles a GPU (default 2097152); $SHAPE ("NX NY NZ"): the strong case's block a lattice of those
 # particles along x, y and z in place of a cube. Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
 # PROFILE=1: then as many steps again with every stage timed, each rank's stages in the JSON line.
+# SPHCORE_MPI_EXCHANGE (cuda, host, alltoallv; unset: the first every rank can) goes to every rank.
 # Each case's GPU clocks and load, every 200 ms, go to $OUT/<case>_gpus.csv (nvidia-smi).
 # Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root on a machine with several GPUs (kind nvidia-h100-x4 or nvidia-h100-x2, RANKS="1 2"),
@@ -13,6 +14,7 @@
 # and, under a load that pauses for the exchange, takes seconds to clock up again (the <case>_gpus.csv files).
 # A case that takes longer than $CASE_SECONDS (default 500) is stopped; run fewer cases a call (RANKS, SCALING).
 set -u -o pipefail
+export SPHCORE_MPI_EXCHANGE=${SPHCORE_MPI_EXCHANGE:-}
 OUT=${OUT:-benchmarks/results/parallel_gpu}
 . benchmarks/gpu_env.sh
 PY=$(which python3)
@@ -36,7 +38,7 @@ for scaling in ${SCALING:-strong weak}; do
         # way between 2 ranks took 16 ms so, 10 ms with it
         timeout "${CASE_SECONDS:-500}" /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$ranks" \
             --mca btl_vader_single_copy_mechanism cma \
-            -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR \
+            -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR -x SPHCORE_MPI_EXCHANGE \
             bash -c 'CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$OMPI_COMM_WORLD_LOCAL_RANK} exec "$0" "$@"' \
             "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --warmup "${WARMUP:-100}" --room "${ROOM:-2}" ${PROFILE:+--profile} --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"

@@ -43,7 +43,7 @@ def main():
         first, end = rank.owned_rows()
         rank.close()
     rows = world.gather({"rank": world.Get_rank(), "ms_per_step": 1e3 * seconds / args.steps,
-                         "exchange": "shared memory" if rank.shared else "alltoallv",
+                         "exchange": rank.exchange_kind,
                          **{f"{p}_ms": 1e3 * rank.seconds[p] / args.steps for p in parallel.PARTS},
                          "owned": int(end - first), "held_mean": held / args.steps}, root=0)
     if world.Get_rank() != 0:

@@ -1,5 +1,5 @@
 """Plot benchmarks/parallel_gpu.py's JSON lines: ms per step against GPUs, strong and weak scaling, with the part
-staged through host memory (the exchange) shaded; prints the table with each case's
+spent in the exchange (rows between ranks: through host memory, or from GPU to GPU) shaded; prints the table with each case's
 efficiency (strong: T1 / (N TN); weak: T1 / TN; T1 the 1-rank driver's, and against the plain 1-GPU run where
 measured) and writes it as JSON beside the plot.
 
@@ -42,7 +42,7 @@ def main():
     rows = table([json.loads(line) for line in args.file.read_text().splitlines() if line.strip()])
     for r in rows:
         print(f"{r['scaling']:6} {r['ranks']} GPUs {r['particles']:>11,} particles: {r['ms_per_step']:9.2f} ms/step, "
-              f"{100 * r['host_staged_share']:5.1f} % staged through the host, efficiency "
+              f"{100 * r['host_staged_share']:5.1f} % in the exchange, efficiency "
               f"{r.get('efficiency', float('nan')):.2f} (against the plain 1-GPU run: "
               f"{r.get('efficiency_vs_plain', float('nan')):.2f})")
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
@@ -55,7 +55,7 @@ def main():
         ms = [r["ms_per_step"] for r in case]
         ax.bar(ranks, ms, width=0.6, color="tab:blue", label="step")
         ax.bar(ranks, [m * r["host_staged_share"] for m, r in zip(ms, case)], width=0.6, color="tab:orange",
-               label="staged through host memory")
+               label="the exchange")
         ideal = [ms[0] / (n / ranks[0]) if scaling == "strong" else ms[0] for n in ranks]
         ax.plot(ranks, ideal, "k--", label="ideal")
         plain = case[0].get("plain_ms_per_step")

@@ -33,6 +33,9 @@ from sphcore.workgroups import group_count
 NAMES = list(BUFFERS)  # binding number = index
 SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow the particle count
 HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
+# Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank.pick),
+# in memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
+MAPPED = ("pick_table", "pick_bounds", "pick_count")
 
 
 def sized_shapes(params, spec):
@@ -370,7 +373,8 @@ class VulkanBackend:
         self.gauges = len(state["gauge_state"]) // 2
         for name in BUFFERS:
             self.shapes[name] = np.shape(state[name])
-            self.buffers[name] = self.ctx.buffer(int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize, name)
+            self.buffers[name] = self.ctx.buffer(int(np.prod(self.shapes[name])) * self.dtypes[name].itemsize, name,
+                                                 mapped=name in MAPPED)
             self.buffers[name].write(np.asarray(state[name], self.dtypes[name]))
         self.params_buffer = self.ctx.buffer(UNIFORM_BYTES, "params", uniform=True)  # (params.glsl: Params)
         self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
@@ -536,7 +540,7 @@ class VulkanBackend:
         for name in grown:  # (zeroed first, as numba's: a row a rank writes in part, a halo's, holds no garbage
             old = self.buffers[name]  # that the sort, which leaves some buffers in place, could hand an owned row)
             self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
-                                                 name)
+                                                 name, mapped=name in MAPPED)
             rec = self.ctx.record()
             rec.fill(self.buffers[name])
             self.ctx.submit(rec.end())
@@ -641,11 +645,14 @@ class VulkanBackend:
 
     def move_rows(self, source, destination, count):
         """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. on the
-        device (the two runs must not overlap)."""
-        for name in sized_shapes(self.params, self.spec):
-            if BUFFERS[name][2] == "particles" and count > 0:
-                size = self._row_bytes(name)
-                self.buffers[name].copy_within([(source * size, destination * size, count * size)])
+        device (the two runs must not overlap), in one submission."""
+        if count > 0:
+            copies = []
+            for name in sized_shapes(self.params, self.spec):
+                if BUFFERS[name][2] == "particles":
+                    buffer, size = self.buffers[name].buffer, self._row_bytes(name)
+                    copies.append((buffer, buffer, [(source * size, destination * size, count * size)]))
+            self.ctx._copies(copies)
         self._known = {}
 
     def step(self, count=1):

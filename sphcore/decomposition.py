@@ -94,20 +94,41 @@ def bands(cuts, next_cuts, rank, other, reach):
     return full, [(need[0], full[0]), (full[1], need[1])]
 
 
-def balance(layer_counts, ranks, previous=None, most=None):
+# What a rank's halo row costs a step, in owned rows: it is sorted and its density summed, but its forces (half an
+# owned row's step: compute_forces 3.4 of 6.6 ms on a rank of 4 H200s) are skipped (compute_forces.comp)
+HALO_COST = 0.5
+
+
+def halos(layer_counts, cuts, reach):
+    """The particles of each rank's halo under `cuts`: those of the `reach` layers past each of its cuts that
+    another rank's slab holds."""
+    counts, cuts = np.asarray(layer_counts, np.int64), np.asarray(cuts)
+    below = [counts[max(cut - reach, 0):cut].sum() for cut in cuts[:-1]]
+    above = [counts[cut:cut + reach].sum() for cut in cuts[1:]]
+    return np.array(below) + np.array(above)
+
+
+def balance(layer_counts, ranks, previous=None, most=None, reach=0):
     """Cuts (ranks + 1 layer numbers) that split the layers, in order, into `ranks` runs of about equal particle
     counts: rank r takes the layers up to where the running count passes (r + 1) / ranks of the total; every
-    rank gets at least one layer. With `previous` cuts and `most`, each cut moves at most `most` layers from its
-    previous place towards that. ValueError where there are fewer layers than ranks."""
+    rank gets at least one layer. With `reach`, about equal work: a rank's own particles and HALO_COST times its
+    halo's (`halos`: a rank inside has two, so it owns less than one at an end), the halos those of the cuts of
+    equal counts. With `previous` cuts and `most`, each cut moves at most `most` layers from its previous place
+    towards that. ValueError where there are fewer layers than ranks."""
     counts = np.asarray(layer_counts, np.int64)
     layers = len(counts)
     if layers < ranks:
         raise ValueError(f"{ranks} ranks but the grid has {layers} cell layers along the slab axis: use at most "
                          f"{layers} ranks")
     running = np.cumsum(counts)
-    targets = running[-1] * np.arange(1, ranks) / ranks
-    cuts = np.searchsorted(running, targets, side="left") + 1  # (the layer whose count reaches the target: below)
-    cuts = np.concatenate([[0], cuts, [layers]])
+
+    def cut_at(targets):  # (after the layer whose running count reaches each target)
+        return np.concatenate([[0], np.searchsorted(running, targets, side="left") + 1, [layers]])
+
+    cuts = cut_at(running[-1] * np.arange(1, ranks) / ranks)
+    if reach:  # again, each rank's share of the work less its halo's
+        halo = HALO_COST * halos(counts, cuts, reach)
+        cuts = cut_at(np.cumsum((running[-1] + halo.sum()) / ranks - halo)[:-1])
     if previous is not None:
         cuts = np.clip(cuts, np.asarray(previous) - most, np.asarray(previous) + most)
     for r in range(1, ranks):  # at least one layer each, from the bottom up, then from the top down

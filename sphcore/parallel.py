@@ -6,12 +6,14 @@ alone: its particles and those of the others within the halo's width (share). Th
 orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell runs in the same order whatever rows
 a rank holds them in. A step:
   [1] the cuts: each rank's owned particles per cell layer (from the rows the last sort gave each layer), summed
-      over the ranks (Allreduce, their total checked) and balanced, each cut moved a layer at most;
+      over the ranks (Allreduce, their total checked) and balanced (a rank's own and half its halo's:
+      decomposition.balance), each cut moved a layer at most;
   [2] to every other rank, of the owned rows of the cell layers near its slab (decomposition.bands), those now in
       its slab (migration: what a step reads of a particle) and those within the halo's width of it (halo: what a
-      step reads of a neighbour, HALO), picked and packed on the device (pick_rows.comp), read back in one copy,
-      through host memory: on one host the ranks' shared memory (Shared: on Vulkan each device copies into and out
-      of it), else one Alltoallv of bytes (nothing pickled, nothing picked on the host);
+      step reads of a neighbour, HALO), picked and packed on the device (pick_rows.comp), copied in one
+      submission: on one host's NVIDIA GPUs from GPU to GPU (sphcore.peers: CUDA IPC), else through host memory,
+      on one host the ranks' shared memory (Shared: on Vulkan each device copies into and out of it), else one
+      Alltoallv of bytes (nothing pickled, nothing picked on the host);
   [3] the received ones written over the old halo's rows;
   [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
       largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
@@ -48,6 +50,7 @@ from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
 from sphcore.gauges import GAUGE_SLOTS, GaugeFiles
 from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
+from sphcore.peers import Peers
 from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, PICK_ENTRIES, buffer_dtype, in_particle_order
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
@@ -66,13 +69,17 @@ def world():
 
 
 def check(scene, backend):
-    """Refuse (SceneError, one line) what this slice does not decompose yet."""
+    """Refuse (SceneError, one line) what this slice does not decompose yet, and an unknown SPHCORE_MPI_EXCHANGE."""
     refused = [("physics.pressure_solver", scene["physics.pressure_solver"] != "state_equation",
                 "DFSPH (its solves iterate over all ranks' particles)"),
                ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)")]
     for key, bad, what in refused:
         if bad:
             raise SceneError(f"{key}: a run on several ranks does not handle {what} yet; run on one rank")
+    exchange = os.environ.get("SPHCORE_MPI_EXCHANGE", "")
+    if exchange and exchange not in EXCHANGES:
+        raise SceneError(f"SPHCORE_MPI_EXCHANGE={exchange}: choose one of {', '.join(EXCHANGES)} (or leave it unset: "
+                         "cuda where every rank can, else host)")
 
 
 def rank_device(local_rank):
@@ -120,6 +127,9 @@ def sent_buffers(spec):
     return (HALO + ("particle_vh",) if spec.VERLET else HALO), HALO
 
 
+# SPHCORE_MPI_EXCHANGE: the rows sent device to device (sphcore.peers), through the ranks' shared host memory
+# (Shared), or in MPI messages (Rank.swap); unset: the first of these every rank can use.
+EXCHANGES = ("cuda", "host", "alltoallv")
 # The parts of a step Rank.seconds times: the exchange (its own parts after it: the counts' Allreduce, the rows read
 # back, the Alltoallv or the shared memory's barrier, the rows written), the stages, the dt.
 PARTS = ("exchange", "counts", "rows", "alltoall", "write", "stages", "dt")
@@ -157,7 +167,7 @@ def share(scene, ranks, rank, precision=np.float32, x=None):
     slabs = Slabs(scene, scene.params(len(x)))
     coordinate = x[:, slabs.axis]
     layer = slabs.layers_of(coordinate)
-    cuts = decomposition.balance(np.bincount(layer, minlength=slabs.layers), ranks)
+    cuts = decomposition.balance(np.bincount(layer, minlength=slabs.layers), ranks, reach=slabs.reach)
     return cuts, slabs.needed_by(coordinate, decomposition.owners(layer, cuts), cuts, rank)
 
 
@@ -240,7 +250,9 @@ class Rank:
         self.cuts = np.asarray(cuts)
         self.start_owned = self.held_owned()  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
-        self.shared = Shared.make(comm, sim.backend)
+        exchange = os.environ.get("SPHCORE_MPI_EXCHANGE", "")
+        self.peers = Peers.make(comm, sim.backend, exchange == "cuda") if exchange in ("", "cuda") else None
+        self.shared = Shared.make(comm, sim.backend) if self.peers is None else None
         self.gauge_rows = []  # (rank 0: the gauges' samples read and not yet taken)
         self.good = None  # (what this rank held at the last step a check passed: keep, replay)
         sim.resize(sim.n, self.owned_cells())
@@ -347,12 +359,12 @@ class Rank:
         if counts.sum() != self.total:
             raise SimulationError(f"step {self.sim.step_count}: the ranks own {counts.sum()} particles, not "
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
-        cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1)
+        cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1, reach=self.reach)
         start = self.lap("counts", start)
-        # [2] the rows each other rank needs, picked and packed on the device, read back and sent
+        # [2] the rows each other rank needs, picked and packed on the device, copied and sent
         regions, rows = self.pick(cuts)
-        received_rows, sources, start = self.swap_shared(regions, rows, start) if self.shared else \
-            self.swap(regions, rows, start)
+        swap = self.swap_peers if self.peers else self.swap_shared if self.shared else self.swap
+        received_rows, sources, start = swap(regions, rows, start)
         # [3] the new halo in the rows of the old: below the owned rows, then after them
         m, owned = int(received_rows.sum()), end - first
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
@@ -412,10 +424,33 @@ class Rank:
         return every[:, self.rank], [(self.shared.buffers[q], int(offsets[q, self.rank])) for q in range(self.size)], \
             self.lap("alltoall", start)
 
+    def swap_peers(self, regions, rows, start):
+        """swap's work from device to device (sphcore.peers): the rows every rank sends every other (one
+        Allgather), this rank's `regions` copied into its outbox and published, a barrier; then every rank's bytes
+        for this one pulled into its inbox."""
+        every = np.empty((self.size, *rows.shape), np.int64)
+        self.comm.Allgather(rows, every)
+        sizes = every @ self.run_bytes  # (bytes rank s sends rank q)
+        offsets = np.cumsum(sizes, axis=1) - sizes
+        self.peers.fit(int(sizes.sum(axis=1).max()), int(sizes[:, self.rank].sum()))
+        self.sim.backend.read_regions(regions, into=self.peers.outbox.buffer)
+        self.peers.publish(int(sizes[self.rank].sum()))
+        start = self.lap("rows", start)
+        self.comm.Barrier()
+        at = self.peers.pull([(q, int(offsets[q, self.rank]), int(sizes[q, self.rank])) for q in range(self.size)])
+        return every[:, self.rank], [(self.peers.inbox.buffer, a) for a in at], self.lap("alltoall", start)
+
+    @property
+    def exchange_kind(self):
+        """How the rows go: "cuda", "host" or "alltoallv" (EXCHANGES)."""
+        return "cuda" if self.peers else "host" if self.shared else "alltoallv"
+
     def close(self):
-        """Free the shared memory (collective: every rank, at the end of a run)."""
+        """Free the shared memory or the peers' boxes (collective: every rank, at the end of a run)."""
         if self.shared:
             self.shared.close()
+        if self.peers:
+            self.peers.close()
 
     def pick(self, cuts):
         """The rows each other rank needs for the next step, under the new `cuts`, picked and packed on the device
@@ -447,10 +482,9 @@ class Rank:
             slot += end - first
         if slot > self.sim.n:  # (rows several ranks need, each packed once for each: room for all)
             self.sim.resize(slot, self.owned_cells())
-        data = np.concatenate([a.view(np.uint8).reshape(-1) for a in (table, bounds, np.zeros(2 * PICK_ENTRIES,
-                                                                                               np.uint32))])
-        backend.write_regions(data, [("pick_table", 0, 0, len(table)), ("pick_bounds", 0, table.nbytes, PICK_ENTRIES),
-                                     ("pick_count", 0, table.nbytes + bounds.nbytes, 2 * PICK_ENTRIES)])
+        for name, values in (("pick_table", table), ("pick_bounds", bounds),
+                             ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
+            backend.write_rows(name, 0, values)  # (on Vulkan mapped memory: backends.MAPPED)
         backend.run_stages([Stage("pick_rows")])
         counts = backend.read_rows("pick_count", 0, 2 * len(entries)).reshape(-1, 2).astype(np.int64)
         regions = []
@@ -652,8 +686,9 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
             if root and scene["bodies"] and checkpoint is None:  # the bodies' wall particles: fixed, written once
                 run_folder.write_bytes("walls.vtp", vtp_bytes(sim.walls["particle_x"], {"body": sim.walls["body"]}))
             if root and progress:
-                print(f"{scene['name']}: {rank.size} ranks, the halo through "
-                      f"{'shared memory' if rank.shared else 'MPI messages (Alltoallv)'}", flush=True)
+                how = {"cuda": "from GPU to GPU (CUDA IPC)", "host": "through shared memory",
+                       "alltoallv": "through MPI messages (Alltoallv)"}[rank.exchange_kind]
+                print(f"{scene['name']}: {rank.size} ranks, the halo {how}", flush=True)
 
             resumed, taken = None, None
             if checkpoint is not None:

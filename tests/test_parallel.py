@@ -34,6 +34,27 @@ def test_balance_evens_counts_on_layer_boundaries():
         decomposition.balance([5, 5], 3)
 
 
+def test_balance_with_reach_evens_what_each_rank_holds():
+    """With the halo's reach, a rank inside (two halos) owns less than one at an end (one): on even layers its
+    work, its own particles and HALO_COST times its halo's (halos, against a sum by hand), is closer to even than
+    with equal shares."""
+    counts = np.full(40, 10)
+    even = decomposition.balance(counts, 4)
+    assert even.tolist() == [0, 10, 20, 30, 40]
+    assert decomposition.halos(counts, even, 6).tolist() == [60, 120, 120, 60]
+    cuts = decomposition.balance(counts, 4, reach=6)
+    work = np.diff(cuts) * 10 + decomposition.HALO_COST * decomposition.halos(counts, cuts, 6)
+    assert work.max() < 160 and work.min() > 130  # (equal shares, HALO_COST 0.5: 130, 160, 160, 130)
+    assert cuts[1] > 10 and cuts[3] < 30  # (the ends own more)
+    rng = np.random.default_rng(7)
+    for ranks in (2, 3, 5):
+        counts = rng.integers(0, 40, size=30)
+        for reach in (1, 4):
+            work = [np.add.reduceat(counts, c[:-1]) + decomposition.HALO_COST * decomposition.halos(counts, c, reach)
+                    for c in (decomposition.balance(counts, ranks), decomposition.balance(counts, ranks, reach=reach))]
+            assert work[1].max() <= work[0].max() + counts.max()  # (a layer's worth at most: the cuts lie on layers)
+
+
 def test_slab_axis_is_the_cell_index_slowest():
     """The slabs' axis is the one whose cell coordinate moves the cell index (cells.py: cell_index) the most."""
     from sphcore.sph.cells import cells
@@ -158,6 +179,14 @@ def test_what_is_not_decomposed_is_refused():
     with pytest.raises(SceneError, match="physics.pressure_solver: .* DFSPH"):
         parallel.check(dfsph, "numba")
     parallel.check(sphcore.Scene.from_dict(dam_break_in_a_tank()), "numba")  # (a body and gauges: taken)
+
+
+def test_an_unknown_exchange_is_refused(monkeypatch):
+    """SPHCORE_MPI_EXCHANGE other than cuda, host or alltoallv is refused by the checks made before a run writes."""
+    from sphcore import parallel
+    monkeypatch.setenv("SPHCORE_MPI_EXCHANGE", "nvlink")
+    with pytest.raises(SceneError, match="SPHCORE_MPI_EXCHANGE=nvlink: choose one of cuda, host, alltoallv"):
+        parallel.check(sphcore.Scene.from_dict(small_dam_break()), "numba")
 
 
 def column(height):
@@ -704,6 +733,48 @@ def test_a_killed_rank_stops_every_rank(tmp_path):
                     str(saved + 10)], env=env, check=True, capture_output=True, timeout=900)
     assert int(np.load(tmp_path / "two" / "final.npz")["step"]) == saved + 10
 
+
+
+@pytest.mark.vulkan
+def test_an_exported_buffer_holds_what_the_device_copies_there():
+    """Context.exported_buffer (the boxes sphcore.peers hands CUDA): an opaque file descriptor of the allocation's
+    bytes; rows copied into it at an offset and back out land where they were sent; the device's UUID (CUDA's
+    match) is 16 bytes."""
+    from conftest import vulkan_or_skip
+    vulkan_or_skip()
+    from sphcore.vk_runner import Context
+    with Context() as ctx:
+        if not ctx.memory_fd:
+            pytest.skip(f"{ctx.device_name} exports no memory")
+        assert len(ctx.device_uuid) == 16
+        box, fd, size = ctx.exported_buffer(1 << 16, "box")
+        try:
+            assert size >= 1 << 16 and os.fstat(fd).st_size >= size
+            rows = ctx.buffer(1 << 16, "rows")
+            rows.write(np.arange(1 << 14, dtype=np.uint32))
+            ctx._copies([(rows.buffer, box.buffer, [(400, 4096, 800)])])
+            ctx._copies([(box.buffer, rows.buffer, [(4096, 0, 800)])])
+            assert rows.read(np.uint32, (300,))[:200].tolist() == list(range(100, 300))
+            assert rows.read(np.uint32, (300,))[200:].tolist() == list(range(200, 300))
+            rows.free()
+        finally:
+            os.close(fd)
+            box.free()
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_rows_gpu_to_gpu_asked_where_a_rank_cannot_is_an_error(tmp_path):
+    """SPHCORE_MPI_EXCHANGE=cuda where a rank has no CUDA device (numba here) stops every rank with one line that
+    names the rank and why; unset, the same run sends the rows through shared memory."""
+    (tmp_path / "dam.toml").write_text(toml(small_dam_break(steps=4)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    run = two_ranks(tmp_path / "dam.toml", tmp_path / "cuda", {**env, "SPHCORE_MPI_EXCHANGE": "cuda"})
+    assert run.returncode != 0
+    assert "SPHCORE_MPI_EXCHANGE=cuda: rank 0: the numba backend has no GPU memory" in run.stderr
+    run = two_ranks(tmp_path / "dam.toml", tmp_path / "auto", {k: v for k, v in env.items()
+                                                               if k != "SPHCORE_MPI_EXCHANGE"})
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "2 ranks, the halo through shared memory" in run.stdout
 
 
 # Rank.gather against the path it replaced: every rank's owned particles loaded in id order onto rank 0's device,

@@ -83,9 +83,16 @@ void pair(uint i, uint j, uint image, real3 r, real r2, real3 inward) {
 #include "walk.glsl"
 
 void main() {
-    // [1] one invocation per particle; the grid is rounded up to whole work groups
+    // [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
+    //     (P.owned_end > 0) the rows the sort gave its slab's cells alone: nothing reads a halo row's acceleration
+    //     (the next exchange writes over the row)
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
+    if (P.owned_end > 0u && (i < cell_start[P.owned_first]
+                             || (P.owned_end < P.cell_total && i >= cell_start[P.owned_end]))) {
+        if (LIST_SKIN > 0u && i == 0u) control[CONTROL_REBUILD] = 0u;
+        return;
+    }
     // [2] own state (BODIES: whether i is a wall particle)
     wall_i = BODIES && particle_id[i] >= P.fluid_count;
     real3 xi = particle_x[i].xyz;

@@ -95,8 +95,15 @@ def compute_forces(spec, real=np.float32):
                             cell_pyramid, cell_start, scratch_x, obstacle_box, control, neighbours,
                             neighbour_count, particle_shift):
         P = params[0]
-        # [1] one invocation per particle; the grid is rounded up to whole work groups
+        # [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
+        #     (P.owned_end > 0) the rows the sort gave its slab's cells alone: nothing reads a halo row's
+        #     acceleration (the next exchange writes over the row)
         if i >= P.n:
+            return
+        if P.owned_end > 0 and (i < cell_start[P.owned_first] or (P.owned_end < P.cell_total
+                                                                  and i >= cell_start[P.owned_end])):
+            if LIST_SKIN > 0 and i == 0:
+                control[CONTROL_REBUILD] = 0
             return
         # [2] own state (BODIES: whether i is a wall particle)
         wall_i = BODIES and particle_id[i] >= P.fluid_count

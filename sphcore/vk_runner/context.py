@@ -7,6 +7,7 @@ return cdata arrays ([0]); a mapped pointer is copied out before vkUnmapMemory.
 import math
 import os
 import sys
+import time
 
 import numpy as np
 
@@ -17,6 +18,9 @@ FENCE_TIMEOUT_NS = 3600 * 10**9
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 CONDITIONAL_RENDERING = "VK_EXT_conditional_rendering"
 HOST_MEMORY = "VK_EXT_external_memory_host"
+MEMORY_FD = "VK_KHR_external_memory_fd"
+SPIN_SECONDS = 0.002  # a GPU's fence polled this long before the host waits for it (submit: a wait returned 30 us
+# later than polling on an H200, benchmarks/submit_latency.py; not on a CPU device, whose threads the polling slows)
 STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for copies, at least
 STAGING_MOST = 1 << 28  # ... and at most: a copy past that allocates its own
 
@@ -52,9 +56,10 @@ DEVICE_TYPE_RANK = ("DISCRETE_GPU", "INTEGRATED_GPU", "VIRTUAL_GPU", "CPU", "OTH
 
 class Buffer:
     """A storage buffer in device-local memory (`uniform`: a uniform buffer); host-mapped where that
-    memory is host-visible."""
+    memory is host-visible, which a uniform buffer and a `mapped` one are where the device has such memory (then
+    the host writes and reads it with no submission)."""
 
-    def __init__(self, ctx, nbytes, name, uniform=False):
+    def __init__(self, ctx, nbytes, name, uniform=False, mapped=False):
         vk = ctx.vk
         self.ctx, self.nbytes, self.name = ctx, max(int(nbytes), 4), name
         usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
@@ -63,7 +68,10 @@ class Buffer:
             usage = vk.VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT
         if ctx.conditional_rendering:
             usage |= vk.VK_BUFFER_USAGE_CONDITIONAL_RENDERING_BIT_EXT
-        self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, name)
+        local, host = vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, (vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT
+                                                               | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT)
+        self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, local, name,
+                                                                    local | host if uniform or mapped else 0)
 
     def write(self, array, offset=0):
         """Write `array`'s bytes into the buffer from byte `offset` on."""
@@ -413,7 +421,11 @@ class Context:
         self.conditional_rendering = CONDITIONAL_RENDERING in extensions
         # host memory the device copies to and from directly, where it can (host_buffer: a rank's exchange)
         self.host_memory = HOST_MEMORY in extensions
+        # memory another API of this process imports (exported_buffer: CUDA's, for a rank's copies to its peers)
+        self.memory_fd = MEMORY_FD in extensions
         enabled, chain = [HOST_MEMORY] if self.host_memory else [], vk.ffi.NULL
+        if self.memory_fd:
+            enabled.append(MEMORY_FD)
         if self.conditional_rendering:
             enabled.append(CONDITIONAL_RENDERING)
             chain = vk.VkPhysicalDeviceConditionalRenderingFeaturesEXT(
@@ -432,6 +444,12 @@ class Context:
             vk.vkGetPhysicalDeviceProperties2(self.physical_device, vk.VkPhysicalDeviceProperties2(
                 sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, pNext=host))
             self.host_alignment = int(host.minImportedHostPointerAlignment)  # (4 KiB on NVIDIA's and lavapipe)
+        if self.memory_fd:
+            self.get_memory_fd = vk.vkGetDeviceProcAddr(self.device, "vkGetMemoryFdKHR")
+        ids = vk.VkPhysicalDeviceIDProperties(sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ID_PROPERTIES)
+        vk.vkGetPhysicalDeviceProperties2(self.physical_device, vk.VkPhysicalDeviceProperties2(
+            sType=vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, pNext=ids))
+        self.device_uuid = bytes(vk.ffi.buffer(ids.deviceUUID))  # (CUDA's cuDeviceGetUuid of the same device)
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
@@ -598,6 +616,44 @@ class Context:
             self, nbytes, name, buffer, memory, False)
         return host
 
+    def exported_buffer(self, nbytes, name="exported"):
+        """A Buffer of `nbytes` of device memory that another API imports (VK_KHR_external_memory_fd: a dedicated
+        allocation, exported as an opaque file descriptor), for copies between it and the device's buffers
+        (_copies); with the descriptor (the importer's to close) and the allocation's bytes. None where the device
+        cannot export."""
+        if not self.memory_fd:
+            return None
+        vk = self.vk
+        kind = vk.VK_EXTERNAL_MEMORY_HANDLE_TYPE_OPAQUE_FD_BIT
+        buffer = vk.vkCreateBuffer(self.device, vk.VkBufferCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO, size=nbytes, sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE,
+            usage=vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+            pNext=vk.VkExternalMemoryBufferCreateInfo(sType=vk.VK_STRUCTURE_TYPE_EXTERNAL_MEMORY_BUFFER_CREATE_INFO,
+                                                      handleTypes=kind)), None)
+        req = vk.vkGetBufferMemoryRequirements(self.device, buffer)
+        props, local = self.memory_properties, vk.VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT
+        index = next((i for i in range(props.memoryTypeCount)
+                      if req.memoryTypeBits & (1 << i) and props.memoryTypes[i].propertyFlags & local), None)
+        try:
+            if index is None:
+                raise vk.VkErrorOutOfDeviceMemory()
+            memory = vk.vkAllocateMemory(self.device, vk.VkMemoryAllocateInfo(
+                sType=vk.VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO, allocationSize=req.size, memoryTypeIndex=index,
+                pNext=vk.VkExportMemoryAllocateInfo(
+                    sType=vk.VK_STRUCTURE_TYPE_EXPORT_MEMORY_ALLOCATE_INFO, handleTypes=kind,
+                    pNext=vk.VkMemoryDedicatedAllocateInfo(
+                        sType=vk.VK_STRUCTURE_TYPE_MEMORY_DEDICATED_ALLOCATE_INFO, buffer=buffer))), None)
+        except (vk.VkError, vk.VkException):
+            vk.vkDestroyBuffer(self.device, buffer, None)
+            return None
+        vk.vkBindBufferMemory(self.device, buffer, memory, 0)
+        fd = self.get_memory_fd(self.device, vk.VkMemoryGetFdInfoKHR(
+            sType=vk.VK_STRUCTURE_TYPE_MEMORY_GET_FD_INFO_KHR, memory=memory, handleType=kind))
+        exported = Buffer.__new__(Buffer)
+        exported.ctx, exported.nbytes, exported.name, exported.buffer, exported.memory, exported.host_visible = (
+            self, nbytes, name, buffer, memory, False)
+        return exported, fd, int(req.size)
+
     def _map(self, memory, nbytes, offset=0):
         vk = self.vk
         try:
@@ -643,8 +699,11 @@ class Context:
 
     def _copies(self, copies):
         """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait."""
-        rec = Recording(self)
+        grouped = {}  # (one command a pair of buffers: a command took 7 us of Python)
         for src, dst, regions in copies:
+            grouped.setdefault((src, dst), []).extend(regions)
+        rec = Recording(self)
+        for (src, dst), regions in grouped.items():
             # (the regions written through numpy: a VkBufferCopy made one by one took 7 us of Python, and a rank of
             # sphcore.parallel reads an entry of each cell layer every step: 2 ms for 300)
             array = self.vk.ffi.new("VkBufferCopy[]", len(regions))
@@ -695,8 +754,8 @@ class Context:
         if commands:
             self._copies(commands)
 
-    def buffer(self, nbytes, name="buffer", uniform=False):
-        return Buffer(self, nbytes, name, uniform)
+    def buffer(self, nbytes, name="buffer", uniform=False, mapped=False):
+        return Buffer(self, nbytes, name, uniform, mapped)
 
     def pipeline(self, spirv, bindings, push_size, local_size=128, spec_values=(), uniform_binding=None):
         return Pipeline(self, spirv, bindings, push_size, local_size, spec_values, uniform_binding)
@@ -714,6 +773,11 @@ class Context:
             vk.vkQueueSubmit(self.queue, 1, [vk.VkSubmitInfo(
                 sType=vk.VK_STRUCTURE_TYPE_SUBMIT_INFO, commandBufferCount=1,
                 pCommandBuffers=[recording.command_buffer])], self.fence)
+            if self.device_type != "CPU":  # (polled a while first: a short submission is known done sooner)
+                until = time.perf_counter() + SPIN_SECONDS
+                while vk.lib.vkGetFenceStatus(self.device, self.fence) == vk.VK_NOT_READY and \
+                        time.perf_counter() < until:
+                    pass
             vk.vkWaitForFences(self.device, 1, [self.fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
         except vk.VkErrorDeviceLost:
             raise VulkanError(f"the Vulkan device was lost ({self.device_name}): its driver reset it (a fault, "
