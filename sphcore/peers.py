@@ -102,14 +102,14 @@ class Peers:
         """CUDA's `name`(*args): what it returns past its result, or a SimulationError naming it."""
         result, *out = getattr(self.cu, name)(*args)
         if result != self.cu.CUresult.CUDA_SUCCESS:
-            raise SimulationError(f"rank {self.rank}: CUDA's {name} failed ({result.name})")
+            raise SimulationError(f"CUDA's {name} failed ({result.name})")
         return out[0] if out else None
 
     def imported(self, nbytes, name):
         """A Box of `nbytes`: a Vulkan buffer exported, imported into CUDA."""
         made = self.ctx.exported_buffer(nbytes, name)
         if made is None:
-            raise SimulationError(f"rank {self.rank}: {self.ctx.device_name} could not export {nbytes} bytes")
+            raise SimulationError(f"{self.ctx.device_name} could not export {nbytes} bytes")
         buffer, fd, size = made
         cu = self.cu
         handle = cu.CUDA_EXTERNAL_MEMORY_HANDLE_DESC()
@@ -145,7 +145,7 @@ class Peers:
             except SimulationError as e:
                 handle = str(e)
             handles = self.comm.allgather(handle)  # (also where a rank failed: every rank then raises)
-            failed = next((h for h in handles if isinstance(h, str)), None)
+            failed = next((f"rank {q}: {h}" for q, h in enumerate(handles) if isinstance(h, str)), None)
             if failed:
                 raise SimulationError(failed)
             lazy = self.cu.CUipcMem_flags.CU_IPC_MEM_LAZY_ENABLE_PEER_ACCESS
