@@ -19,8 +19,9 @@ VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 CONDITIONAL_RENDERING = "VK_EXT_conditional_rendering"
 HOST_MEMORY = "VK_EXT_external_memory_host"
 MEMORY_FD = "VK_KHR_external_memory_fd"
-SPIN_SECONDS = 0.002  # a GPU's fence polled this long before the host waits for it (submit: a wait returned 30 us
-# later than polling on an H200, benchmarks/submit_latency.py; not on a CPU device, whose threads the polling slows)
+SPIN_SECONDS = 0.002  # a GPU's fence polled this long before the host waits for it (submit: a wait returned 26-29 us
+# later than polling for a copy on an H200, benchmarks/submit_latency.py; not on a CPU device, whose threads the
+# polling slows)
 STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for copies, at least
 STAGING_MOST = 1 << 28  # ... and at most: a copy past that allocates its own
 
