@@ -407,20 +407,25 @@ class Rank:
                             [received, (receive_bytes, offsets), MPI.BYTE])
         return received_rows, [(received, int(offset)) for offset in offsets], self.lap("alltoall", start)
 
+    def every_rows(self, rows):
+        """The rows every rank sends every other (one Allgather of each rank's `rows`: ranks x ranks x 2), the
+        bytes rank s sends rank q, and where those start among rank s's."""
+        every = np.empty((self.size, *rows.shape), np.int64)
+        self.comm.Allgather(rows, every)
+        sizes = every @ self.run_bytes
+        return every, sizes, np.cumsum(sizes, axis=1) - sizes
+
     def swap_shared(self, regions, rows, start):
         """swap's work through the ranks' shared memory (Shared): the rows every rank sends every other (one
         Allgather), this rank's `regions` copied into its part, a barrier; each rank's bytes for this one are then
         in that rank's part."""
-        every = np.empty((self.size, *rows.shape), np.int64)
-        self.comm.Allgather(rows, every)
-        sizes = every @ self.run_bytes  # (bytes rank s sends rank q)
+        every, sizes, offsets = self.every_rows(rows)
         if not self.shared.fit(int(sizes.sum(axis=1).max())):
             self.shared = None
             return self.swap(regions, rows, start)
         self.sim.backend.read_regions(regions, into=self.shared.buffers[self.rank])
         start = self.lap("rows", start)
         self.comm.Barrier()  # (every part written; a part is written again after the next step's Allreduce)
-        offsets = np.cumsum(sizes, axis=1) - sizes
         return every[:, self.rank], [(self.shared.buffers[q], int(offsets[q, self.rank])) for q in range(self.size)], \
             self.lap("alltoall", start)
 
@@ -428,10 +433,7 @@ class Rank:
         """swap's work from device to device (sphcore.peers): the rows every rank sends every other (one
         Allgather), this rank's `regions` copied into its outbox and published, a barrier; then every rank's bytes
         for this one pulled into its inbox."""
-        every = np.empty((self.size, *rows.shape), np.int64)
-        self.comm.Allgather(rows, every)
-        sizes = every @ self.run_bytes  # (bytes rank s sends rank q)
-        offsets = np.cumsum(sizes, axis=1) - sizes
+        every, sizes, offsets = self.every_rows(rows)
         self.peers.fit(int(sizes.sum(axis=1).max()), int(sizes[:, self.rank].sum()))
         self.sim.backend.read_regions(regions, into=self.peers.outbox.buffer)
         self.peers.publish(int(sizes[self.rank].sum()))

@@ -21,6 +21,11 @@ GRAIN = 1 << 20  # bytes: the boxes grow by a quarter past what is asked, in who
 HANDLE_BYTES = 64  # a CUipcMemHandle
 
 
+def room(nbytes):
+    """A box's bytes for `nbytes`: a quarter more, in whole GRAINs."""
+    return -(-int(nbytes * 1.25) // GRAIN) * GRAIN
+
+
 def cuda():
     """cuda-bindings' driver module, initialized, and None; or None and why not."""
     try:
@@ -137,7 +142,7 @@ class Peers:
         `receive` in the inbox, each grown by a quarter past it where there is less."""
         if self.outbox is None or send > self.outbox.nbytes:
             self.close_mailboxes()
-            nbytes, handle = -(-int(send * 1.25) // GRAIN) * GRAIN, None
+            nbytes, handle = room(send), None
             try:
                 self.outbox = self.imported(nbytes, "outbox")
                 self.mailbox = Box(None, None, self.call("cuMemAlloc", nbytes), nbytes)
@@ -154,7 +159,7 @@ class Peers:
         if self.inbox is None or receive > self.inbox.nbytes:
             self.free(self.inbox)
             self.inbox = None
-            self.inbox = self.imported(-(-int(receive * 1.25) // GRAIN) * GRAIN, "inbox")
+            self.inbox = self.imported(room(receive), "inbox")
 
     def handle(self, data):
         handle = self.cu.CUipcMemHandle()

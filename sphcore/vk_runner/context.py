@@ -74,6 +74,15 @@ class Buffer:
         self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, local, name,
                                                                     local | host if uniform or mapped else 0)
 
+    @classmethod
+    def bound(cls, ctx, nbytes, name, buffer, memory):
+        """A Buffer over a VkBuffer and the memory bound to it, made elsewhere (Context.host_buffer's,
+        exported_buffer's): copied into and out of, not mapped."""
+        made = cls.__new__(cls)
+        made.ctx, made.nbytes, made.name, made.buffer, made.memory, made.host_visible = (
+            ctx, nbytes, name, buffer, memory, False)
+        return made
+
     def write(self, array, offset=0):
         """Write `array`'s bytes into the buffer from byte `offset` on."""
         data = np.ascontiguousarray(array)
@@ -612,10 +621,7 @@ class Context:
         except (vk.VkError, vk.VkException):
             vk.vkDestroyBuffer(self.device, buffer, None)
             return None
-        host = Buffer.__new__(Buffer)
-        host.ctx, host.nbytes, host.name, host.buffer, host.memory, host.host_visible = (
-            self, nbytes, name, buffer, memory, False)
-        return host
+        return Buffer.bound(self, nbytes, name, buffer, memory)
 
     def exported_buffer(self, nbytes, name="exported"):
         """A Buffer of `nbytes` of device memory that another API imports (VK_KHR_external_memory_fd: a dedicated
@@ -650,10 +656,7 @@ class Context:
         vk.vkBindBufferMemory(self.device, buffer, memory, 0)
         fd = self.get_memory_fd(self.device, vk.VkMemoryGetFdInfoKHR(
             sType=vk.VK_STRUCTURE_TYPE_MEMORY_GET_FD_INFO_KHR, memory=memory, handleType=kind))
-        exported = Buffer.__new__(Buffer)
-        exported.ctx, exported.nbytes, exported.name, exported.buffer, exported.memory, exported.host_visible = (
-            self, nbytes, name, buffer, memory, False)
-        return exported, fd, int(req.size)
+        return Buffer.bound(self, nbytes, name, buffer, memory), fd, int(req.size)
 
     def _map(self, memory, nbytes, offset=0):
         vk = self.vk
