@@ -33,9 +33,9 @@ from sphcore.workgroups import group_count
 NAMES = list(BUFFERS)  # binding number = index
 SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow the particle count
 HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
-# Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank.pick),
-# in memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
-MAPPED = ("pick_table", "pick_bounds", "pick_count")
+# Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), in
+# memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
+MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start")
 
 
 def sized_shapes(params, spec):
@@ -237,8 +237,11 @@ class NumbaBackend:
             rows = self.state[name][row:row + count]
             rows.view(np.uint8).reshape(-1)[...] = data[offset:offset + rows.nbytes]
 
-    def write_parts(self, parts):
-        """write_regions of each (data, regions) of `parts`."""
+    def write_parts(self, parts, move=None):
+        """write_regions of each (data, regions) of `parts`, after move_rows(*move) where given (rows the writes do
+        not touch)."""
+        if move is not None:
+            self.move_rows(*move)
         for data, regions in parts:
             self.write_regions(data, regions)
 
@@ -533,8 +536,7 @@ class VulkanBackend:
         descriptor sets are rebound to the new ones). The uniform gets the new params. The recordings dispatch
         the buffers' capacity (`rows`), so only a growth frees them (the next steps record anew: a recording of
         one step's stages is a few milliseconds of Python)."""
-        shapes = sized_shapes(params, self.spec)
-        self.ctx.vk.vkDeviceWaitIdle(self.ctx.device)
+        shapes = sized_shapes(params, self.spec)  # (the device is idle: every submission is waited for)
         grown = [name for name, shape in shapes.items()
                  if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
         for name in grown:  # (zeroed first, as numba's: a row a rank writes in part, a halo's, holds no garbage
@@ -625,9 +627,9 @@ class VulkanBackend:
         `regions`, `count` rows from `row` on to the bytes from `offset` on; in one submission."""
         self.write_parts([(data, regions)])
 
-    def write_parts(self, parts):
+    def write_parts(self, parts, move=None):
         """write_regions of each (data, regions) of `parts`, in one submission: each `data` host_buffer's, or one
-        host array (uint8) for them all."""
+        host array (uint8) for them all; with move_rows(*move) where given (rows the writes do not touch)."""
         copied = []
         for data, regions in parts:
             copies = []
@@ -636,7 +638,9 @@ class VulkanBackend:
                 copies.append((self.buffers[name], offset, row * size, count * size))
                 self._known.pop(name, None)
             copied.append((data, copies))
-        self.ctx.write_parts(copied)
+        self.ctx.write_parts(copied, self._moves(*move) if move else ())
+        if move:
+            self._known = {}
 
     def read_entries(self, name, indices):
         """The entries `indices` of a one-component buffer, in one copy from the device."""
@@ -647,13 +651,17 @@ class VulkanBackend:
         """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. on the
         device (the two runs must not overlap), in one submission."""
         if count > 0:
-            copies = []
-            for name in sized_shapes(self.params, self.spec):
-                if BUFFERS[name][2] == "particles":
-                    buffer, size = self.buffers[name].buffer, self._row_bytes(name)
-                    copies.append((buffer, buffer, [(source * size, destination * size, count * size)]))
-            self.ctx._copies(copies)
+            self.ctx._copies(self._moves(source, destination, count))
         self._known = {}
+
+    def _moves(self, source, destination, count):
+        """move_rows' copies ((src, dst, regions) each: Context._copies')."""
+        copies = []
+        for name in sized_shapes(self.params, self.spec) if count > 0 else ():
+            if BUFFERS[name][2] == "particles":
+                buffer, size = self.buffers[name].buffer, self._row_bytes(name)
+                copies.append((buffer, buffer, [(source * size, destination * size, count * size)]))
+        return copies
 
     def step(self, count=1):
         if self.windows is None:

@@ -72,7 +72,9 @@ def check(scene, backend):
     """Refuse (SceneError, one line) what this slice does not decompose yet, and an unknown SPHCORE_MPI_EXCHANGE."""
     refused = [("physics.pressure_solver", scene["physics.pressure_solver"] != "state_equation",
                 "DFSPH (its solves iterate over all ranks' particles)"),
-               ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)")]
+               ("domain.boundary", scene["domain.boundary"] != "walls", "an open domain (its grid wraps around)"),
+               ("physics.neighbour_search", scene["physics.neighbour_search"] != "grid",
+                "all-pairs search (the slabs are the grid's cell layers)")]
     for key, bad, what in refused:
         if bad:
             raise SceneError(f"{key}: a run on several ranks does not handle {what} yet; run on one rank")
@@ -241,7 +243,6 @@ class Rank:
         self.slabs = Slabs(sim.scene, sim.params)
         self.axis, self.layers, self.per_layer, self.reach = (self.slabs.axis, self.slabs.layers,
                                                               self.slabs.per_layer, self.slabs.reach)
-        self.layer_cells = np.arange(self.layers) * self.per_layer  # (each layer's first cell: its rows' start)
         precision = sim.scene["physics.precision"]
         self.row_bytes = {name: buffer_dtype(name, precision).itemsize * BUFFERS[name][1] for name in LOADED}
         self.sent = sent_buffers(sim.scene.spec)
@@ -304,7 +305,7 @@ class Rank:
             start = self.lap("dt", start)
         if self.after_dt:
             backend.run_stages(self.after_dt)
-        self.starts = np.append(backend.read_entries("cell_start", self.layer_cells), self.sim.n).astype(np.int64)
+        self.starts = np.append(backend.read_rows("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
         self.lap("stages", start)
         self.sim.step_count += 1
 
@@ -367,16 +368,20 @@ class Rank:
         received_rows, sources, start = swap(regions, rows, start)
         # [3] the new halo in the rows of the old: below the owned rows, then after them
         m, owned = int(received_rows.sum()), end - first
+        move = None
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
             moved = min(first - m, owned)
-            backend.move_rows(end - moved, m, moved)
+            move = end - moved, m, moved
         self.cuts = cuts
-        # a resize (a wait and three copies) only where the count or the slab changed, or to have reused lists built
-        P = self.sim.params[0]
-        if m + owned != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or \
-                self.sim.scene.spec.LIST_SKIN:
-            self.sim.resize(m + owned, self.owned_cells())
-        at, parts = 0, {}  # (every rank's rows in one submission: its memory's regions)
+        # a resize only where the count or the slab changed, or to have reused lists built; before the rows are
+        # written where the count grows, after where it shrinks (the rows moved are of the old count)
+        P, n = self.sim.params[0], m + owned
+        resize = n != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or \
+            self.sim.scene.spec.LIST_SKIN
+        if resize and n > self.sim.n:
+            self.sim.resize(n, self.owned_cells())
+            resize = False
+        at, parts = 0, {}  # (every rank's rows in one submission, with the move: its memory's regions)
         for q_rows, (data, offset) in zip(received_rows, sources):
             regions = parts.setdefault(id(data), (data, []))[1]
             for count, names in zip(q_rows, self.sent):
@@ -387,7 +392,9 @@ class Rank:
                                                             count - below)]
                     offset += count * size
                 at += count
-        backend.write_parts(list(parts.values()))
+        backend.write_parts(list(parts.values()), move)
+        if resize:
+            self.sim.resize(n, self.owned_cells())
         self.lap("write", start)
 
     def swap(self, regions, rows, start):

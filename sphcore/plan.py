@@ -37,7 +37,7 @@ REAL = "real"  # a buffer of the shaders' `real`: float32 or float64, as the pre
 PRECISIONS = ("float32", "float64")
 
 # binding number = index: name -> (dtype, components, length: "particles" | "cells" | "pyramid" | "neighbours"
-# (DFSPH's list slots) | count)
+# (DFSPH's list slots) | "layers" (of cells, along the grid's slowest axis) | count)
 BUFFERS = {
     "particle_x": (REAL, 4, "particles"),
     "particle_v": (REAL, 4, "particles"),
@@ -77,6 +77,7 @@ BUFFERS = {
     "pick_table": (np.uint32, 4, 1 + 2 * PICK_ENTRIES),
     "pick_bounds": (np.float32, 4, PICK_ENTRIES),
     "pick_count": (np.uint32, 1, 2 * PICK_ENTRIES),
+    "layer_start": (np.uint32, 1, "layers"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -109,6 +110,8 @@ BUFFERS = {
 # entries, then two rows an entry (another rank): the rows it may need (first, end) and its slab's layers (first,
 # end), then its first slot and slots; the slab widened by the halo's width (lowest, highest coordinate); the
 # migrants and the halo rows picked for it.
+# layer_start: the first row of each cell layer (the grid's slowest index) after the sort (cell_offsets), which a
+# rank reads after a step (sphcore.parallel: Rank.starts).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
 # spec.OBSTACLES pairs are read (float32, like the parameter block's walls).
 STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
@@ -120,7 +123,7 @@ STAGES = {
     "count_cells": (count_cells, "particles", ("particle_x", "particle_id", "particle_cell", "particle_slot",
                                                "cell_pyramid", "grid_status")),
     "reduce_cells": (reduce_cells, "nodes", ("cell_pyramid",)),
-    "cell_offsets": (cell_offsets, "cells", ("cell_pyramid", "cell_start", "grid_status")),
+    "cell_offsets": (cell_offsets, "cells", ("cell_pyramid", "cell_start", "grid_status", "layer_start")),
     "scatter_particles": (scatter_particles, "particles", ("particle_cell", "particle_slot", "cell_start",
                                                            "sorted_index")),
     "sort_cells": (sort_cells, "cells", ("cell_pyramid", "cell_start", "sorted_index", "particle_id")),
@@ -236,6 +239,8 @@ def buffer_length(length, params, max_neighbours=0, gradients=False, gauges=0):
         return int(params[0]["cell_total"])
     if length == "pyramid":
         return pyramid_levels(int(params[0]["cell_total"]))[1]
+    if length == "layers":
+        return int(params[0]["grid_dim"].max())  # (room for the layers along any axis: the slowest's, 2D or 3D)
     return length
 
 

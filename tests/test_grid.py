@@ -146,6 +146,9 @@ def test_sorted_order_is_by_cell_then_index_and_offsets_match_counts():
     counts = np.bincount(cells, minlength=int(np.prod(dims)))
     np.testing.assert_array_equal(s["cell_pyramid"][:len(counts)], counts)
     np.testing.assert_array_equal(s["cell_start"], np.concatenate([[0], np.cumsum(counts)[:-1]]))
+    # each cell layer (z, the slowest index) starts after the particles of the layers below it
+    layers = np.bincount(expected[:, 2], minlength=dims[2])
+    np.testing.assert_array_equal(s["layer_start"][:dims[2]], np.concatenate([[0], np.cumsum(layers)[:-1]]))
     # every pyramid level sums its 8 children; the top holds n
     levels, total = pyramid_levels(len(counts))
     assert len(s["cell_pyramid"]) == total and s["cell_pyramid"][-1] == len(x)
@@ -170,8 +173,11 @@ def test_vulkan_sort_is_bitwise_the_numba_sort(open_backend, dim):
         for stage in plan(scene)[:-3]:
             b.run_stage(stage)
         out[name] = b.read()
-    for key in ("particle_id", "particle_cell", "cell_pyramid", "cell_start", "sorted_index", "grid_status"):
+    for key in ("particle_id", "particle_cell", "cell_pyramid", "cell_start", "sorted_index", "grid_status",
+                "layer_start"):
         np.testing.assert_array_equal(out["numba"][key], out["vulkan"][key], err_msg=key)
+    layers = np.bincount(np.floor(out["numba"]["particle_x"][:, dim - 1] * params[0]["inv_cell"]).astype(np.int64))
+    assert np.count_nonzero(layers) > 2  # (layers of particles, their starts compared above)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

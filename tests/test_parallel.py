@@ -178,6 +178,9 @@ def test_what_is_not_decomposed_is_refused():
     dfsph = sphcore.Scene.from_dict({**small_dam_break(), "physics": {"model": "dfsph"}})
     with pytest.raises(SceneError, match="physics.pressure_solver: .* DFSPH"):
         parallel.check(dfsph, "numba")
+    pairs = sphcore.Scene.from_dict({**small_dam_break(), "physics": {"model": "graphics", "neighbour_search": "all_pairs"}})
+    with pytest.raises(SceneError, match="physics.neighbour_search: .* all-pairs search"):
+        parallel.check(pairs, "numba")
     parallel.check(sphcore.Scene.from_dict(dam_break_in_a_tank()), "numba")  # (a body and gauges: taken)
 
 

@@ -1,6 +1,7 @@
 #version 460
 // Start of each cell's run in the sorted order: the number of particles in all cells before
-// it, read from the HistoPyramid top-down (seed 2). One invocation per cell.
+// it, read from the HistoPyramid top-down (seed 2), and of each cell layer's (the grid's slowest
+// index: a rank of sphcore.parallel reads them after a step). One invocation per cell.
 // Mirror: sphcore/sph/cell_offsets.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -12,6 +13,7 @@ layout(local_size_x_id = 0) in;
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) writeonly buffer CellStart { uint cell_start[]; };
 layout(std430, binding = 14) buffer GridStatus { uint grid_status[]; };
+layout(std430, binding = 38) writeonly buffer LayerStart { uint layer_start[]; };
 
 void main() {
     // [1] one invocation per cell
@@ -28,7 +30,10 @@ void main() {
         }
     }
     cell_start[c] = start;
-    // [3] the top of the pyramid must hold every particle exactly once; a mismatch is counted
+    // [3] a layer's first cell: the layer's start
+    uint per_layer = P.cell_total / (DIM == 3u ? P.grid_dim.z : P.grid_dim.y);
+    if (c % per_layer == 0u) layer_start[c / per_layer] = start;
+    // [4] the top of the pyramid must hold every particle exactly once; a mismatch is counted
     //     in grid_status[2] (an overflow or a lost particle: never silently accepted)
     if (c == 0u && cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n) atomicAdd(grid_status[2], 1u);
 }

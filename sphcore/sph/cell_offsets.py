@@ -1,5 +1,6 @@
 """Start of each cell's run in the sorted order: the number of particles in all cells before
-it, read from the HistoPyramid top-down (seed 2). One invocation per cell.
+it, read from the HistoPyramid top-down (seed 2), and of each cell layer's (the grid's slowest
+index: a rank of sphcore.parallel reads them after a step). One invocation per cell.
 
 Mirror of shaders/sph/cell_offsets.comp: same names, same statement order, same step labels.
 The atomic on grid_status is made by invocation 0 alone, so a parallel launch is exact.
@@ -15,8 +16,10 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def cell_offsets(spec, real=np.float32):
+    DIM = spec.DIM
+
     @njit
-    def cell_offsets_main(c, params, cell_pyramid, cell_start, grid_status):
+    def cell_offsets_main(c, params, cell_pyramid, cell_start, grid_status, layer_start):
         P = params[0]
         # [1] one invocation per cell
         if c >= P.cell_total:
@@ -30,7 +33,11 @@ def cell_offsets(spec, real=np.float32):
             for s in range(ancestor & ~7, ancestor):
                 start += cell_pyramid[offset + s]
         cell_start[c] = start
-        # [3] the top of the pyramid must hold every particle exactly once; a mismatch is counted
+        # [3] a layer's first cell: the layer's start
+        per_layer = int(P.cell_total) // int(P.grid_dim[2] if DIM == 3 else P.grid_dim[1])
+        if c % per_layer == 0:
+            layer_start[c // per_layer] = start
+        # [4] the top of the pyramid must hold every particle exactly once; a mismatch is counted
         #     in grid_status[2] (an overflow or a lost particle: never silently accepted)
         if c == 0 and cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n:
             grid_status[2] += 1

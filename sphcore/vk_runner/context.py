@@ -736,10 +736,11 @@ class Context:
         space_to_write's)."""
         self.write_parts([(data, copies)])
 
-    def write_parts(self, parts):
+    def write_parts(self, parts, copies_first=()):
         """write_regions of each (data, copies) of `parts`, in one submission: each `data` a Buffer, or one host
-        array (uint8) for them all."""
-        commands, staged = [], None
+        array (uint8) for them all; with the buffer copies `copies_first` (_copies') where given, of bytes the
+        writes do not touch."""
+        commands, staged = list(copies_first), None
         for data, copies in parts:
             copies = [c for c in copies if c[3]]
             for buffer, _, offset, count in copies:
