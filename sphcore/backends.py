@@ -245,10 +245,6 @@ class NumbaBackend:
         for data, regions in parts:
             self.write_regions(data, regions)
 
-    def read_entries(self, name, indices):
-        """The entries `indices` of a one-component buffer."""
-        return self.state[name][np.asarray(indices, np.int64)].copy()
-
     def move_rows(self, source, destination, count):
         """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. (the two
         runs must not overlap)."""
@@ -641,11 +637,6 @@ class VulkanBackend:
         self.ctx.write_parts(copied, self._moves(*move) if move else ())
         if move:
             self._known = {}
-
-    def read_entries(self, name, indices):
-        """The entries `indices` of a one-component buffer, in one copy from the device."""
-        size = self.dtypes[name].itemsize
-        return self.buffers[name].gather(self.dtypes[name], [(int(k) * size, size) for k in indices])
 
     def move_rows(self, source, destination, count):
         """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. on the

@@ -301,8 +301,8 @@ def test_pick_rows_packs_what_each_rank_needs(backend):
 
 @pytest.mark.vulkan
 def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
-    """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_entries, read_regions,
-    write_regions): a resize keeps
+    """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_regions, write_regions)
+    and each cell layer's first row it reads (layer_start, mapped on Vulkan): a resize keeps
     the first rows, grown past the buffers too (Vulkan copies them into the new ones); a move copies a run of every
     per-particle buffer; both backends hold the same bits after each, and step them alike."""
     from conftest import vulkan_or_skip
@@ -328,8 +328,11 @@ def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
             sim.step(3)
         for name in LOADED:
             assert np.array_equal(gpu.backend.read_rows(name, 0, 400), cpu.backend.read_rows(name, 0, 400)), name
-        cells = np.arange(0, gpu.params[0]["cell_total"], 7)
-        assert np.array_equal(gpu.backend.read_entries("cell_start", cells), cpu.backend.read_entries("cell_start", cells))
+        layers = int(gpu.params[0]["grid_dim"][1])
+        starts = gpu.backend.read_rows("layer_start", 0, layers)
+        assert np.array_equal(starts, cpu.backend.read_rows("layer_start", 0, layers))
+        assert starts[0] == 0 and np.all(np.diff(starts.astype(np.int64)) >= 0) and starts[-1] <= 400
+        assert len(np.unique(starts)) > 2  # (the column spans several layers)
         # runs of rows of several buffers read back as one block of bytes, and written from one
         regions = [("particle_x", 5, 9), ("particle_id", 300, 400), ("particle_rho", 0, 0), ("particle_v", 390, 400)]
         block = gpu.backend.read_regions(regions)

@@ -105,22 +105,9 @@ class Buffer:
             return np.zeros(shape, dtype)
         if self.host_visible:
             return self.ctx._read_mapped(self.memory, nbytes, offset).view(dtype).reshape(shape)
-        return self.gather(dtype, [(offset, nbytes)]).reshape(shape)
-
-    def gather(self, dtype, regions):
-        """The bytes of `regions` ((byte offset, byte count) each), one after the other, as an array of `dtype`:
-        one copy of many regions (a few words of a large buffer, without reading all of it)."""
-        nbytes = sum(count for _, count in regions)
-        if nbytes == 0:
-            return np.zeros(0, dtype)
-        if self.host_visible:
-            return np.concatenate([self.ctx._read_mapped(self.memory, count, offset)
-                                   for offset, count in regions]).view(dtype)
         staging = self.ctx._staging(nbytes)
-        ends = np.cumsum([0] + [count for _, count in regions]).tolist()
-        self.ctx._copy(self.buffer, staging.buffer, [(offset, end, count)
-                                                     for (offset, count), end in zip(regions, ends)])
-        out = staging.bytes[:nbytes].copy().view(dtype)
+        self.ctx._copy(self.buffer, staging.buffer, [(offset, 0, nbytes)])
+        out = staging.bytes[:nbytes].copy().view(dtype).reshape(shape)
         self.ctx._release(staging)
         return out
 
@@ -708,8 +695,8 @@ class Context:
             grouped.setdefault((src, dst), []).extend(regions)
         rec = Recording(self)
         for (src, dst), regions in grouped.items():
-            # (the regions written through numpy: a VkBufferCopy made one by one took 7 us of Python, and a rank of
-            # sphcore.parallel reads an entry of each cell layer every step: 2 ms for 300)
+            # (the regions written through numpy: a VkBufferCopy made one by one took 7 us of Python, 2 ms for the
+            # 300 regions a rank of sphcore.parallel once read every step)
             array = self.vk.ffi.new("VkBufferCopy[]", len(regions))
             np.frombuffer(self.vk.ffi.buffer(array), np.uint64).reshape(-1, 3)[:] = regions
             self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, len(regions), array)
