@@ -339,8 +339,7 @@ class Simulation:
 
     def params_of(self, n, owned_cells=(0, 0)):
         """The parameter block of n particles (the fluid's first) and `owned_cells` (load's)."""
-        params = self.params.copy()  # (the scene's block folded at the start: a rank asks for one a step)
-        params[0]["n"] = n
+        params = self.scene.params(n, self.fluid_count)
         params[0]["owned_first"], params[0]["owned_end"] = owned_cells
         return params
 
