@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from sphcore import decomposition, folder, gauges, health
+from sphcore.backends import packed
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
@@ -246,7 +247,6 @@ class Rank:
         precision = sim.scene["physics.precision"]
         self.row_bytes = {name: buffer_dtype(name, precision).itemsize * BUFFERS[name][1] for name in LOADED}
         self.sent = sent_buffers(sim.scene.spec)
-        self.run_bytes = np.array([sum(self.row_bytes[name] for name in names) for names in self.sent])
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
         self.start_owned = self.held_owned()  # (the start's snapshot)
@@ -390,7 +390,7 @@ class Rank:
                     size = self.row_bytes[name]
                     regions += [(name, at, offset, below), (name, end + at + below - first, offset + below * size,
                                                             count - below)]
-                    offset += count * size
+                    offset += packed(count * size)
                 at += count
         backend.write_parts(list(parts.values()), move)
         if resize:
@@ -407,19 +407,24 @@ class Rank:
         start = self.lap("rows", start)
         received_rows = np.empty_like(rows)
         self.comm.Alltoall(rows, received_rows)
-        send_bytes, receive_bytes = rows @ self.run_bytes, received_rows @ self.run_bytes
+        send_bytes, receive_bytes = self.packed_bytes(rows), self.packed_bytes(received_rows)
         received = self.sim.backend.space_to_write(int(receive_bytes.sum()))
         offsets = np.cumsum(receive_bytes) - receive_bytes
         self.comm.Alltoallv([sent, (send_bytes, np.cumsum(send_bytes) - send_bytes), MPI.BYTE],
                             [received, (receive_bytes, offsets), MPI.BYTE])
         return received_rows, [(received, int(offset)) for offset in offsets], self.lap("alltoall", start)
 
+    def packed_bytes(self, rows):
+        """The bytes of rows (..., 2: migrants, halo rows) as read_regions packs them (each buffer's run from a
+        multiple of backends.PACK_GRAIN bytes), in pick's order."""
+        return sum(packed(rows[..., k] * self.row_bytes[name]) for k, names in enumerate(self.sent) for name in names)
+
     def every_rows(self, rows):
         """The rows every rank sends every other (one Allgather of each rank's `rows`: ranks x ranks x 2), the
         bytes rank s sends rank q, and where those start among rank s's."""
         every = np.empty((self.size, *rows.shape), np.int64)
         self.comm.Allgather(rows, every)
-        sizes = every @ self.run_bytes
+        sizes = self.packed_bytes(every)
         return every, sizes, np.cumsum(sizes, axis=1) - sizes
 
     def swap_shared(self, regions, rows, start):

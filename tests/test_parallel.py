@@ -348,6 +348,12 @@ def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
         assert np.array_equal(cpu.backend.read_rows("particle_id", 0, 100), ids)
         assert np.array_equal(cpu.backend.read_rows("particle_x", 200, 202), block[:32].view(np.float32).reshape(2, 4))
         assert np.array_equal(cpu.backend.read_rows("particle_v", 398, 400), block[464:496].view(np.float32).reshape(2, 4))
+        # each region from a multiple of 16 bytes (backends.PACK_GRAIN): 3 ids (12 bytes), then a position at 16
+        for sim in (gpu, cpu):
+            block = sim.backend.read_regions([("particle_id", 0, 3), ("particle_x", 5, 6)])
+            assert len(block) == 32
+            assert np.array_equal(block[:12].view(np.uint32), cpu.backend.read_rows("particle_id", 0, 3))
+            assert np.array_equal(block[16:].view(np.float32), cpu.backend.read_rows("particle_x", 5, 6)[0])
 
 
 def test_one_rank_is_bitwise_a_simulation_in_id_order():
