@@ -2,8 +2,9 @@
 (about a rank's halo on 4 GPUs at 33.7 M particles) from one buffer to another as 1, 2, 4, 10 and 40 regions, in one
 vkCmdCopyBuffer or a command a region; and one region from and to an exported buffer (sphcore.peers' outbox and
 inbox). 42 MiB / 10 is not a multiple of 4 bytes, 42 MiB / 40 is (not of 8); "_by_4" and "_by_16": the regions'
-bytes rounded down to a multiple of 4 or 16 (a row of a density is 4 bytes, of a position 16). Prints one JSON line (median microseconds of 50)
-and appends it to argv[1] where given. On a GPU: `. benchmarks/gpu_env.sh; python3 benchmarks/copy_regions.py`.
+bytes rounded down to a multiple of 4 or 16 (a row of a density is 4 bytes, of a position 16). Prints one JSON line
+(median microseconds of 50) and appends it to argv[1] where given. On a GPU:
+`. benchmarks/gpu_env.sh; python3 benchmarks/copy_regions.py`.
 """
 import json
 import sys
@@ -34,7 +35,7 @@ def median_us(src, dst, parts, a_command_each, grain=1):
         vk.vkCmdCopyBuffer(rec.command_buffer, src.buffer, dst.buffer, len(group), array)
     rec = rec.end()
     times = []
-    for k in range(REPEATS + 3):
+    for _ in range(REPEATS + 3):
         start = time.perf_counter()
         ctx.submit(rec)
         times.append(time.perf_counter() - start)
