@@ -2,12 +2,15 @@
 examples run and leave their pictures, the scene-keys page says what `sphcore keys` says, and the
 first scene of the getting-started page is a valid scene.
 
-The build is the README's command into a temporary folder; sphinx-gallery writes its generated
-pages into docs/auto_examples (ignored by git) and runs an example again only when it changed.
+The build is the README's command on a copy of docs/ in a temporary folder: sphinx-gallery writes its
+generated pages into the source folder (docs/auto_examples), where two builds at once (this module's tests split
+over pytest-xdist's processes, each building the site) would write over each other's pages: a build failed once
+so under `pytest -q`.
 """
 import html.parser
 import json
 import re
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -26,8 +29,12 @@ def site(tmp_path_factory):
     pytest.importorskip("sphinx")
     pytest.importorskip("sphinx_gallery")
     out = tmp_path_factory.mktemp("docs")
+    tree = out / "tree"  # (docs/ copied; what its pages and conf.py name beside it, linked)
+    shutil.copytree(DOCS, tree / "docs", ignore=shutil.ignore_patterns("_build", "auto_examples", "__pycache__"))
+    for name in ("examples", "benchmarks", "validation"):
+        (tree / name).symlink_to(ROOT / name)
     cmd = [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-b", "html", "-d", str(out / "doctrees"),
-           str(DOCS), str(out / "html")]
+           str(tree / "docs"), str(out / "html")]
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=900)
     return out / "html", done
 
