@@ -778,7 +778,9 @@ def main(run_args):
             raise
         sys.exit(128 + e.signum)
     except BaseException as e:
-        print(f"sphcore: error: rank {comm.Get_rank()} of {comm.Get_size()}: {e}", file=sys.stderr, flush=True)
+        # one write: print() writes the line and its newline apart, and mpiexec's abort banner can land between
+        sys.stderr.write(f"sphcore: error: rank {comm.Get_rank()} of {comm.Get_size()}: {e}\n")
+        sys.stderr.flush()
         if comm.Get_size() > 1:
             comm.Abort(1)
         raise
