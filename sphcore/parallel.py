@@ -61,7 +61,11 @@ from sphcore.stepper import LOADED, Simulation, wall_particles
 from sphcore.vk_runner import Context
 
 def world():
-    """mpi4py's COMM_WORLD; SceneError naming the extra where mpi4py is missing."""
+    """mpi4py's COMM_WORLD; SceneError naming the extra where mpi4py is missing. Open MPI 5's one-sided component
+    osc/ucx, where UCX has no transport for one-sided calls (one host, TCP), prints a bogus "Error: OSC UCX component
+    priority set inside component query failed" on every rank (open-mpi/ompi#14086): the one window here is in
+    shared memory (osc/sm's), so osc/ucx is left out unless OMPI_MCA_osc names the components."""
+    os.environ.setdefault("OMPI_MCA_osc", "^ucx")  # (read as MPI starts: the import below)
     try:
         from mpi4py import MPI
     except ImportError:

@@ -555,6 +555,8 @@ def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
                          capture_output=True, text=True, timeout=900)
     assert two.returncode == 0, two.stderr[-2000:]
     assert two.stdout.count(f"{n} particles, {steps} steps on 2 ranks") == 1  # (rank 0 alone prints)
+    lines = [line for line in two.stderr.replace("\r", "\n").splitlines() if line.strip()]
+    assert lines and all(line.startswith(config["name"]) for line in lines), two.stderr[-2000:]  # (its bar alone)
     one, two = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "two" / "final.npz")
     for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
         assert np.array_equal(one[name], two[name]), name
