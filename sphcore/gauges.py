@@ -24,6 +24,7 @@ POINT = ("pressure", "velocity", "density", "height")  # the quantities of a poi
 ON_BODY = ("force", "moment")
 KEYS = ("name", "quantity", "at", "body", "about", "interval")
 GAUGE_SLOTS = 256  # samples a gauge keeps on the device between reads (plan.BUFFERS: gauge_samples)
+LAYER_SLOTS = 16  # on a rank, samples of a force's or moment's layer sums kept (gauge_layers; sample_gauges.comp)
 MAX_GAUGES = 256
 FOLDER = "gauges"  # RUN/gauges/NAME.csv
 
@@ -153,6 +154,7 @@ class GaugeReader:
         self.columns = [[0, 3] if g["quantity"] == "moment" and scene.dim == 2
                         else list(range(1 + len(columns(g["quantity"], scene.dim)))) for g in scene.config["gauges"]]
         self.taken = np.asarray(state)[1::2, 1].astype(np.int64)  # samples read so far, per gauge
+        self.on_body = [g["quantity"] in ON_BODY for g in scene.config["gauges"]]
         self.since = 0
 
     def read(self, backend):
@@ -162,38 +164,48 @@ class GaugeReader:
         """Of each gauge's `samples` (rows of time, x, y, z) the columns of its CSV."""
         return [rows[:, kept] for rows, kept in zip(samples, self.columns)]
 
-    def samples(self, backend):
-        """The new samples of each gauge as the device wrote them: (rows, 4) arrays of time, x, y, z."""
+    def samples(self, backend, layers=0):
+        """The new samples of each gauge as the device wrote them: (rows, 4) arrays of time, x, y, z. With `layers`
+        (on a rank of sphcore.parallel: the grid's cell layers), (those, and each force's or moment's sums over
+        each layer for them: (rows, layers, 3) arrays in the buffers' precision, None for the other gauges)."""
         state = np.asarray(backend.read_buffer("gauge_state"))
         taken = state[1::2, 1].astype(np.int64)
         new = taken - self.taken
-        if (new > GAUGE_SLOTS).any() or (new < 0).any():
-            g = int(np.argmax((new > GAUGE_SLOTS) | (new < 0)))
+        slots = LAYER_SLOTS if layers and any(self.on_body) else GAUGE_SLOTS
+        if (new > slots).any() or (new < 0).any():
+            g = int(np.argmax((new > slots) | (new < 0)))
             raise SimulationError(f"gauge {self.names[g]!r}: {int(new[g])} samples since the last read, its ring "
-                                  f"on the device holds {GAUGE_SLOTS}: samples were lost")
+                                  f"on the device holds {slots}: samples were lost")
         rows = [np.zeros((0, 4)) for _ in self.columns]
+        sums = [np.zeros((0, layers, 3)) if on_body else None for on_body in self.on_body]
         if new.any():
             samples = np.asarray(backend.read_buffer("gauge_samples"), np.float64).reshape(len(taken), GAUGE_SLOTS, 4)
             for g in range(len(rows)):
                 rows[g] = samples[g][np.arange(self.taken[g], taken[g]) % GAUGE_SLOTS]
+            if layers and any(self.on_body):
+                ring = backend.read_buffer("gauge_layers")[:len(taken) * LAYER_SLOTS * layers]
+                ring = ring.reshape(len(taken), LAYER_SLOTS, layers, 4)
+                for g in np.flatnonzero(self.on_body):
+                    sums[g] = ring[g][np.arange(self.taken[g], taken[g]) % LAYER_SLOTS, :, :3]
         self.taken, self.since = taken, 0
-        return rows
+        return (rows, sums) if layers else rows
 
 
 def merged(scene, ranks):
-    """The samples of each gauge from those of every rank of sphcore.parallel (`ranks`: GaugeReader.samples of each,
-    in rank order), as one rank takes them: a rank samples what lies in its slab, the time -1 where it took nothing
-    (sample_gauges.comp). A point's sample is the one rank's whose slab holds it; a height's, the highest rank's
-    that found the surface (value y 1: the slabs go up the line in rank order where it runs along their axis, and
-    lie beside it where not), else 0 (at the time of a rank's that took it). A force or moment is the sum of the
-    ranks' (each of its slab's rows), added in rank order in the buffers' precision: one rank's sum split in
-    runs and reassociated, so within rounding of it, not its bits. SimulationError where no rank took a sample."""
+    """The samples of each gauge from those of every rank of sphcore.parallel (`ranks`: GaugeReader.samples(backend,
+    layers) of each, in rank order), as one rank takes them: a rank samples what lies in its slab, the time -1 where
+    it took nothing (sample_gauges.comp). A point's sample is the one rank's whose slab holds it; a height's, the
+    highest rank's that found the surface (value y 1: the slabs go up the line in rank order where it runs along
+    their axis, and lie beside it where not), else 0 (at the time of a rank's that took it). A force or moment is
+    the sum of its layers' sums, added over the ranks (one rank's each, the others' 0) and then along the layers in
+    the buffers' precision, times the mass, as the shader adds them on one rank: the same bits whatever the cuts.
+    SimulationError where no rank took a sample."""
     out = []
     for g, gauge in enumerate(scene.config["gauges"]):
-        counts = {len(samples[g]) for samples in ranks}
+        counts = {len(samples[g]) for samples, _ in ranks}
         if len(counts) > 1:
             raise SimulationError(f"gauge {gauge['name']!r}: the ranks took {sorted(counts)} samples, not as many")
-        rows = np.stack([samples[g] for samples in ranks])  # (ranks, samples, 4)
+        rows = np.stack([samples[g] for samples, _ in ranks])  # (ranks, samples, 4)
         took = rows[:, :, 0] >= 0
         if not took.any(axis=0).all():
             raise SimulationError(f"gauge {gauge['name']!r}: no rank took one of its samples (no slab held "
@@ -205,11 +217,13 @@ def merged(scene, ranks):
             pick = np.where(found.any(axis=0), highest, pick)
         taken = rows[pick, np.arange(rows.shape[1])]
         if gauge["quantity"] in ON_BODY:
-            real = np.float64 if scene["physics.precision"] == "float64" else np.float32
-            total = rows[0, :, 1:].astype(real)
-            for values in rows[1:, :, 1:]:
-                total = total + values.astype(real)
-            taken[:, 1:] = total
+            sums = ranks[0][1][g]  # (samples, layers, 3)
+            for _, other in ranks[1:]:
+                sums = sums + other[g]  # (x + 0 is x: one rank's sum each)
+            total = np.zeros((len(taken), 3), sums.dtype)
+            for layer in range(sums.shape[1]):
+                total = total + sums[:, layer]
+            taken[:, 1:] = sums.dtype.type(np.float32(scene.mass)) * total  # (the mass as gauge_table holds it)
         out.append(taken)
     return out
 

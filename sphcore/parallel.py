@@ -23,10 +23,10 @@ Snapshots are ParaView's parallel files: each rank writes its owned particles as
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
 a checkpoint resumes on any number of ranks (`sphcore run --resume`; Rank.restore). A gauge samples on every rank
 what lies in its slab (sample_gauges.comp); rank 0 takes each sample from the rank that holds it (gauges.merged;
-a force or moment: the sum of the ranks', within rounding of one rank's) and writes RUN/gauges/*.csv as one rank
-does. At a snapshot each rank checks its own particles, the energy summed over the ranks (a failure more than a
-step after the last good check replayed from it, to name the first bad step). SIGINT or SIGTERM on any
-rank stops every rank at one step, after a checkpoint.
+a force or moment: its sums over each cell layer, each from the rank that holds it, added along the layers) and
+writes RUN/gauges/*.csv as one rank does. At a snapshot each rank checks its own particles, the energy summed over
+the ranks (a failure more than a step after the last good check replayed from it, to name the first bad step).
+SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
 rank's message.
 
@@ -49,7 +49,7 @@ from sphcore.backends import packed
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, SceneError, SimulationError
-from sphcore.gauges import GAUGE_SLOTS, GaugeFiles
+from sphcore.gauges import GAUGE_SLOTS, LAYER_SLOTS, GaugeFiles
 from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
 from sphcore.peers import Peers
 from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, PICK_ENTRIES, buffer_dtype, in_particle_order
@@ -294,7 +294,7 @@ class Rank:
         ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
-            if self.sim.gauges.since >= GAUGE_SLOTS:
+            if self.sim.gauges.since >= (LAYER_SLOTS if any(self.sim.gauges.on_body) else GAUGE_SLOTS):
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
@@ -316,7 +316,7 @@ class Rank:
     def read_gauges(self):
         """The gauges' new samples of every rank, merged on rank 0 as one rank takes them (gauges.merged) and kept
         there for take_gauge_rows (collective)."""
-        samples = self.comm.gather(self.sim.gauges.samples(self.sim.backend), root=0)
+        samples = self.comm.gather(self.sim.gauges.samples(self.sim.backend, self.layers), root=0)
         if self.rank == 0:
             rows = self.sim.gauges.kept(gauges.merged(self.sim.scene, samples))
             self.gauge_rows = rows if not self.gauge_rows else [np.concatenate(p) for p in zip(self.gauge_rows, rows)]

@@ -5,7 +5,7 @@ binding number = index), the stages with their mirrors and the buffers each bind
 """
 import numpy as np
 
-from sphcore.gauges import GAUGE_SLOTS
+from sphcore.gauges import GAUGE_SLOTS, LAYER_SLOTS
 from sphcore.params import MAX_OBSTACLES, pyramid_levels
 from sphcore.solvers import solver_for
 from sphcore.sph.apply_order import apply_order
@@ -78,6 +78,7 @@ BUFFERS = {
     "pick_bounds": (np.float32, 4, PICK_ENTRIES),
     "pick_count": (np.uint32, 1, 2 * PICK_ENTRIES),
     "layer_start": (np.uint32, 1, "layers"),
+    "gauge_layers": (REAL, 4, "gauge_layers"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -112,6 +113,8 @@ BUFFERS = {
 # migrants and the halo rows picked for it.
 # layer_start: the first row of each cell layer (the grid's slowest index) after the sort (cell_offsets), which a
 # rank reads after a step (sphcore.parallel: Rank.starts).
+# gauge_layers: on a rank, a force or moment gauge's sum over each cell layer, a ring of LAYER_SLOTS samples a gauge
+# (sample_gauges.comp; "gauge_layers": LAYER_SLOTS rows of "layers" a gauge, at least 1 gauge's).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
 # spec.OBSTACLES pairs are read (float32, like the parameter block's walls).
 STATUS_CLEAR = np.array([0, 0xFFFFFFFF, 0, 0], np.uint32)
@@ -167,7 +170,8 @@ STAGES = {
                                                            "time_state")),
     "sample_gauges": (sample_gauges, "gauges", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                 "particle_p", "particle_id", "cell_pyramid", "cell_start",
-                                                "time_state", "gauge_table", "gauge_state", "gauge_samples")),
+                                                "time_state", "gauge_table", "gauge_state", "gauge_samples",
+                                                "layer_start", "gauge_layers")),
     "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
                                            "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "particle_a",
                                            "pick_table", "pick_bounds", "pick_count")),
@@ -229,6 +233,8 @@ def buffer_length(length, params, max_neighbours=0, gradients=False, gauges=0):
         return 2 * max(1, gauges)
     if length == "gauge_samples":
         return GAUGE_SLOTS * max(1, gauges)
+    if length == "gauge_layers":
+        return LAYER_SLOTS * max(1, gauges) * buffer_length("layers", params)
     if length == "particles":
         return int(params[0]["n"])
     if length == "neighbours":

@@ -14,16 +14,17 @@
 //     interpolated linearly between the two points around it; 0 where no point reaches it.
 //   force, moment on a body: F = m sum a_j over the body's particles (ids [first, first + count), after
 //     compute_forces particle_a holds the fluid's force on them per unit mass), M = sum (x_j - about) x (m a_j);
-//     one invocation sums them in the particles' order in the buffers (the same on both backends): the same bits
-//     every run.
+//     one invocation sums each cell layer's rows in the buffers' order, then the layers' sums in layer order (the
+//     same on both backends): the same bits every run.
 // A sample is the row (time, value x, y, z) at slot `taken` mod GAUGE_SLOTS of the gauge's ring in gauge_samples,
 // which the host reads before it can fill (sphcore.gauges.GaugeReader). Layouts: sphcore/plan.py (BUFFERS).
 // On a rank of sphcore.parallel (P.owned_end > 0) a gauge samples what lies in the rank's slab (in_slab): a point
 // there, and of a height's line the points there and each one's point below (the halo reaches that far:
 // decomposition.halo_width), the surface found only between a point there and the one below. Its value y says
 // whether it found one (height); a rank that sampled nothing writes the time -1. sphcore.gauges.merged takes each
-// sample from the ranks' rows: the bits of one rank's. A force or moment sums over the rows of the rank's slab, and
-// merged adds the ranks' sums (not one rank's bits: the sum is split where the cuts fall).
+// sample from the ranks' rows: the bits of one rank's. Of a force or moment a rank writes each of its slab's layers'
+// sums (the others' 0) in gauge_layers, a ring of LAYER_SLOTS samples a gauge (rows of P.grid_dim[DIM - 1] layers),
+// which merged adds over the ranks and then along the layers: the bits of one rank's, wherever the cuts fall.
 // Mirror: sphcore/sph/sample_gauges.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -45,6 +46,8 @@ layout(std430, binding = 20) readonly buffer TimeState { vec4 time_state[]; };
 layout(std430, binding = 32) readonly buffer GaugeTable { vec4 gauge_table[]; };
 layout(std430, binding = 33) buffer GaugeState { uvec4 gauge_state[]; };
 layout(std430, binding = 34) writeonly buffer GaugeSamples { real4 gauge_samples[]; };
+layout(std430, binding = 38) readonly buffer LayerStart { uint layer_start[]; };
+layout(std430, binding = 39) writeonly buffer GaugeLayers { real4 gauge_layers[]; };
 #include "cell_ranges.glsl"
 
 const uint PRESSURE = 0u;  // sphcore.gauges.QUANTITIES
@@ -53,6 +56,7 @@ const uint DENSITY = 2u;
 const uint HEIGHT = 3u;
 const uint FORCE = 4u;
 const uint MOMENT = 5u;
+const uint LAYER_SLOTS = 16u;  // sphcore.gauges.LAYER_SLOTS: samples a gauge's ring of layer sums holds
 
 // Whether time t is at or past `target`, within 1e-6 of it (runner.reached: n dt in float32 falls short of a decimal
 // time by its rounding); `precise`: no contraction, the same bits as the mirror.
@@ -161,20 +165,31 @@ void main() {
         sampled = seen > 0u;
     }
     if (kind.x >= FORCE) {
+        // a sum over each cell layer's rows (layer_start; the whole buffer without a grid), the layers' sums added
+        // in layer order; on a rank (owned_end > 0) each layer's sum also into the sample's row of gauge_layers,
+        // those of its slab's layers and 0 for the others: sphcore.gauges.merged adds the ranks' rows (x + 0 is
+        // x) and the layers as here, to one rank's bits whatever the cuts
         real3 force = real3(0.0);
         precise real3 moment = real3(0.0);  // (precise: r x a not contracted to fused multiply-adds, as the mirror)
-        uint first = 0u;  // (on a rank, the rows the sort gave its slab's cells: its share of the sum)
-        uint end = P.n;
-        if (P.owned_end > 0u) {
-            first = cell_start[P.owned_first];
-            end = P.owned_end < P.cell_total ? cell_start[P.owned_end] : P.n;
-        }
-        for (uint i = first; i < end; ++i) {
-            if (particle_id[i] - kind.y >= kind.z) continue;  // (not the body's: unsigned, below first too)
-            real3 a = particle_a[i].xyz;
-            real3 r = particle_x[i].xyz - aux;
-            force += a;
-            moment += real3(r.y * a.z - r.z * a.y, r.z * a.x - r.x * a.z, r.x * a.y - r.y * a.x);
+        uint layers = GRID ? P.grid_dim[DIM - 1u] : 1u;
+        uint per_layer = P.cell_total / layers;
+        uint row = (g * LAYER_SLOTS + progress.y % LAYER_SLOTS) * layers;
+        for (uint l = 0u; l < layers; ++l) {
+            real3 layer_force = real3(0.0);
+            precise real3 layer_moment = real3(0.0);
+            bool mine = P.owned_end == 0u || (l * per_layer >= P.owned_first && l * per_layer < P.owned_end);
+            uint first = GRID ? layer_start[l] : 0u;
+            uint end = l + 1u < layers ? layer_start[l + 1u] : P.n;
+            for (uint i = first; mine && i < end; ++i) {
+                if (particle_id[i] - kind.y >= kind.z) continue;  // (not the body's: unsigned, below first too)
+                real3 a = particle_a[i].xyz;
+                real3 r = particle_x[i].xyz - aux;
+                layer_force += a;
+                layer_moment += real3(r.y * a.z - r.z * a.y, r.z * a.x - r.x * a.z, r.x * a.y - r.y * a.x);
+            }
+            force += layer_force;
+            moment += layer_moment;
+            if (P.owned_end > 0u) gauge_layers[row + l] = real4(kind.x == FORCE ? layer_force : layer_moment, 0.0);
         }
         real mass = real(gauge_table[2u * g + 1u].w);
         value.xyz = mass * (kind.x == FORCE ? force : moment);

@@ -2,9 +2,9 @@
 time of the step's start): a sample at the first step at or past each multiple of a gauge's interval. pressure,
 velocity, density: Shepard-normalised SPH interpolation at a point over the fluid within h (DualSPHysics'
 MeasureTool, GaugeVel), no mirror images; height: where the mass sum along the vertical line falls below
-rho_0 / 2 (DualSPHysics' GaugeSwl); force, moment: m sum a over a body's particles, in buffer order. On a rank
-of sphcore.parallel, what lies in its slab (a force: the sum over its slab's rows); a sample it took nothing of
-has the time -1 (the shader says more).
+rho_0 / 2 (DualSPHysics' GaugeSwl); force, moment: m sum a over a body's particles, each cell layer's in buffer
+order, then the layers' in layer order. On a rank of sphcore.parallel, what lies in its slab (a force: each of its
+slab's layers' sums in gauge_layers as well); a sample it took nothing of has the time -1 (the shader says more).
 
 Mirror of shaders/sph/sample_gauges.comp: same names, same statement order, same step labels. A GLSL vec3
 local `v` is `v_x, v_y, v_z` here; the time's float32 arithmetic is numba's float32, as the shader's.
@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.gauges import LAYER_SLOTS
 from sphcore.sph.cell_ranges import cell_ranges
 from sphcore.sph.cells import cells
 from sphcore.sph.kernels import kernels
@@ -25,7 +26,7 @@ PRESSURE, VELOCITY, DENSITY, HEIGHT, FORCE, MOMENT = range(6)  # sphcore.gauges.
 
 @lru_cache(maxsize=None)
 def sample_gauges(spec, real=np.float32):
-    BODIES, DIM = spec.BODIES, spec.DIM
+    BODIES, DIM, GRID = spec.BODIES, spec.DIM, spec.GRID
     cell_of = cells(spec, real).cell_of
     range_count = cells(spec, real).range_count
     cell_range = cell_ranges(spec, real)
@@ -116,7 +117,8 @@ def sample_gauges(spec, real=np.float32):
 
     @njit
     def sample_gauges_main(g, params, particle_x, particle_v, particle_a, particle_rho, particle_p, particle_id,
-                           cell_pyramid, cell_start, time_state, gauge_table, gauge_state, gauge_samples):
+                           cell_pyramid, cell_start, time_state, gauge_table, gauge_state, gauge_samples,
+                           layer_start, gauge_layers):
         P = params[0]
         # [1] one invocation per gauge
         if g >= len(gauge_state) // 2:
@@ -154,24 +156,46 @@ def sample_gauges(spec, real=np.float32):
             value_y = real(1.0) if seen == 2 else real(0.0)
             sampled = seen > 0
         if quantity >= FORCE:
+            # a sum over each cell layer's rows, the layers' sums added in layer order; on a rank each layer's sum
+            # also into the sample's row of gauge_layers (its slab's layers'; 0 for the others)
             force_x = force_y = force_z = real(0.0)
             moment_x = moment_y = moment_z = real(0.0)
-            first = 0  # (on a rank, the rows the sort gave its slab's cells: its share of the sum)
-            end = int(P.n)
-            if P.owned_end > 0:
-                first = int(cell_start[P.owned_first])
-                end = int(cell_start[P.owned_end]) if P.owned_end < P.cell_total else int(P.n)
-            for i in range(first, end):
-                if (int(particle_id[i]) - body_first) & 0xFFFFFFFF >= body_count:
-                    continue  # (not the body's: unsigned, below first too)
-                a_x, a_y, a_z = particle_a[i, 0], particle_a[i, 1], particle_a[i, 2]
-                r_x, r_y, r_z = particle_x[i, 0] - aux_x, particle_x[i, 1] - aux_y, particle_x[i, 2] - aux_z
-                force_x += a_x
-                force_y += a_y
-                force_z += a_z
-                moment_x += r_y * a_z - r_z * a_y
-                moment_y += r_z * a_x - r_x * a_z
-                moment_z += r_x * a_y - r_y * a_x
+            layers = int(P.grid_dim[DIM - 1]) if GRID else 1
+            per_layer = int(P.cell_total) // layers
+            row = (g * LAYER_SLOTS + taken % LAYER_SLOTS) * layers
+            for layer in range(layers):
+                layer_force_x = layer_force_y = layer_force_z = real(0.0)
+                layer_moment_x = layer_moment_y = layer_moment_z = real(0.0)
+                mine = P.owned_end == 0 or (P.owned_first <= layer * per_layer < P.owned_end)
+                first = int(layer_start[layer]) if GRID else 0
+                end = int(layer_start[layer + 1]) if layer + 1 < layers else int(P.n)
+                for i in range(first, end if mine else first):
+                    if (int(particle_id[i]) - body_first) & 0xFFFFFFFF >= body_count:
+                        continue  # (not the body's: unsigned, below first too)
+                    a_x, a_y, a_z = particle_a[i, 0], particle_a[i, 1], particle_a[i, 2]
+                    r_x, r_y, r_z = particle_x[i, 0] - aux_x, particle_x[i, 1] - aux_y, particle_x[i, 2] - aux_z
+                    layer_force_x += a_x
+                    layer_force_y += a_y
+                    layer_force_z += a_z
+                    layer_moment_x += r_y * a_z - r_z * a_y
+                    layer_moment_y += r_z * a_x - r_x * a_z
+                    layer_moment_z += r_x * a_y - r_y * a_x
+                force_x += layer_force_x
+                force_y += layer_force_y
+                force_z += layer_force_z
+                moment_x += layer_moment_x
+                moment_y += layer_moment_y
+                moment_z += layer_moment_z
+                if P.owned_end > 0:
+                    if quantity == FORCE:
+                        gauge_layers[row + layer, 0] = layer_force_x
+                        gauge_layers[row + layer, 1] = layer_force_y
+                        gauge_layers[row + layer, 2] = layer_force_z
+                    else:
+                        gauge_layers[row + layer, 0] = layer_moment_x
+                        gauge_layers[row + layer, 1] = layer_moment_y
+                        gauge_layers[row + layer, 2] = layer_moment_z
+                    gauge_layers[row + layer, 3] = real(0.0)
             mass = real(gauge_table[2 * g + 1, 3])
             if quantity == FORCE:
                 value_x, value_y, value_z = mass * force_x, mass * force_y, mass * force_z
