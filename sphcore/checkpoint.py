@@ -2,7 +2,8 @@
 
 `read_checked(path, scene, carried)` first reads each member's .npy header from the zip (dtype and
 shape) and compares it with what the scene needs, so a header that claims 25e9 floats costs
-nothing; then loads the members (allow_pickle=False) and checks their values: the backend is one
+nothing; then loads the members (allow_pickle=False; a large one stored uncompressed, as np.savez stores
+them, mapped from the file, copy on write: _read) and checks their values: the backend is one
 of sphcore's, the step within [0, 1e9], the particle ids a permutation, the grid status clear,
 every real value finite and every position inside the walls. A failure is a CheckpointError of
 one line naming the file and the field. The energy bound is not taken from the file: the
@@ -20,6 +21,7 @@ from sphcore.solvers import SOLVERS
 MAX_STEP = 10**9  # time.steps' range
 MAX_TEXT = 2**20  # characters of the scene's JSON, the backend and device names
 MAX_EXTRA = 2**28  # bytes of a member beyond the buffers (a solver's log), loaded as it is
+MAPPED_BYTES = 2**20  # a member stored uncompressed from this size on is mapped from the file (_read)
 CHECKPOINT = "checkpoint.npz"  # its name in the run's folder
 # The buffers that carry the state from one step to the next (and the outputs of the last one): the generic
 # ones, then each solver's (whichever solver the scene runs, a checkpoint holds them all); every other buffer
@@ -97,14 +99,31 @@ def read_checked(path, scene, params, carried, optional=("energy_start",)):
             got_shape, got_dtype = _header(archive, stored[field])
             if got_dtype.hasobject or int(np.prod(got_shape)) * got_dtype.itemsize > MAX_EXTRA:
                 raise CheckpointFieldError(field, f"is {got_dtype}{list(got_shape)}: no checkpoint holds that")
-        with np.load(path, allow_pickle=False) as data:
-            for field in members:
-                arrays[field] = data[field]
-            for field in list(optional) + extras:
-                if field in stored:
-                    arrays[field] = data[field]
+        for field in [*members, *(f for f in [*optional, *extras] if f in stored)]:
+            arrays[field] = _read(path, archive, stored[field])
     check_values(arrays, scene, params, carried)
     return arrays
+
+
+def _read(path, archive, member):
+    """Member `member` of the zip `archive` (the file `path`): mapped from the file, copy on write, where it is a
+    large array stored uncompressed (np.savez's), so that the ranks of one host resuming from one checkpoint share
+    its pages (each then copies its own rows: sphcore.parallel); else read."""
+    info = archive.getinfo(member)
+    if info.compress_type == zipfile.ZIP_STORED and info.file_size >= MAPPED_BYTES:
+        with open(path, "rb") as f:
+            f.seek(info.header_offset + 26)  # (the local header: its name's and extra field's lengths at 26)
+            name, extra = np.frombuffer(f.read(4), "<u2")
+            f.seek(info.header_offset + 30 + int(name) + int(extra))
+            version = np.lib.format.read_magic(f)
+            read = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}[version]
+            shape, fortran, dtype = read(f, max_header_size=10000)
+            offset = f.tell()
+        if not fortran and not dtype.hasobject and offset + dtype.itemsize * int(np.prod(shape)) <= \
+                info.header_offset + 30 + int(name) + int(extra) + info.file_size:
+            return np.memmap(path, dtype, "c", offset, shape)
+    with archive.open(member) as f:
+        return np.lib.format.read_array(f, allow_pickle=False)
 
 
 def check_values(arrays, scene, params, carried):

@@ -341,7 +341,7 @@ def load_checkpoint(out_dir):
     if difference:
         raise CheckpointError(f"{scene_file} is not the scene {path} was computed with ({difference}); "
                               "put the run's scene back, or start a new run in another folder")
-    n = len(scene.initial_positions())
+    n = scene.fluid_count()
     try:
         arrays = read_checked(path, scene, scene.params(n), CARRIED)
     except CheckpointFieldError as e:

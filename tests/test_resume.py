@@ -292,3 +292,21 @@ def test_unreadable_series_is_named(tmp_path, capsys):
     assert f"sphcore: error: {tmp_path / 'run' / 'dam.pvd'}: not a readable ParaView collection" in err
     assert "Traceback" not in err and (tmp_path / "run" / "dam.pvd").read_text() == "<VTKFile><Collection>"
     assert (tmp_path / "run" / "final.npz").is_file()  # refused before a step: the final state is kept
+
+
+@pytest.mark.parametrize("stored", ["mapped", "compressed"])
+def test_a_checkpoint_mapped_or_compressed_resumes_to_the_same_bits(stored, uninterrupted, tmp_path, monkeypatch):
+    """A checkpoint's members np.savez stored uncompressed are mapped from the file, copy on write, from
+    checkpoint.MAPPED_BYTES on (the ranks of one host resuming from one file share its pages): here every member. A
+    checkpoint compressed by hand (np.savez_compressed) is read whole. Either resumes to the bits of a run never
+    stopped."""
+    from sphcore import checkpoint
+    run(Scene.from_dict(SCENE), "numba", 110, tmp_path, progress=False)
+    if stored == "compressed":
+        np.savez_compressed(tmp_path / CHECKPOINT, **dict(np.load(tmp_path / CHECKPOINT)))
+    monkeypatch.setattr(checkpoint, "MAPPED_BYTES", 1)
+    _, arrays = load_checkpoint(tmp_path)
+    mapped = sorted(name for name, values in arrays.items() if isinstance(values, np.memmap))
+    assert mapped == ([] if stored == "compressed" else sorted(arrays))
+    assert main(["run", "--resume", str(tmp_path), "--steps", str(STEPS)]) == 0
+    assert (tmp_path / "final.npz").read_bytes() == (uninterrupted("numba") / "final.npz").read_bytes()
