@@ -50,12 +50,17 @@ def expected_members(scene, params, carried):
 def _header(archive, member):
     """(shape, dtype) from the .npy header of `member`, reading nothing else."""
     with archive.open(member) as f:
-        version = np.lib.format.read_magic(f)
-        read = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}.get(version)
-        if read is None:
-            raise ValueError(f"unknown .npy version {version}")
-        shape, _, dtype = read(f, max_header_size=10000)
+        shape, _, dtype = _npy_header(f)
     return shape, dtype
+
+
+def _npy_header(f):
+    """(shape, Fortran order, dtype) of the .npy header at file `f`'s position, which it leaves at the data."""
+    version = np.lib.format.read_magic(f)
+    read = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+    if read is None:
+        raise ValueError(f"unknown .npy version {version}")
+    return read(f, max_header_size=10000)
 
 
 def read_scene(path):
@@ -112,15 +117,14 @@ def _read(path, archive, member):
     info = archive.getinfo(member)
     if info.compress_type == zipfile.ZIP_STORED and info.file_size >= MAPPED_BYTES:
         with open(path, "rb") as f:
-            f.seek(info.header_offset + 26)  # (the local header: its name's and extra field's lengths at 26)
+            f.seek(info.header_offset + 26)  # (the local header's 30 bytes end with its name's and extra's lengths)
             name, extra = np.frombuffer(f.read(4), "<u2")
-            f.seek(info.header_offset + 30 + int(name) + int(extra))
-            version = np.lib.format.read_magic(f)
-            read = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}[version]
-            shape, fortran, dtype = read(f, max_header_size=10000)
+            start = info.header_offset + 30 + int(name) + int(extra)  # (the member's first byte)
+            f.seek(start)
+            shape, fortran, dtype = _npy_header(f)
             offset = f.tell()
-        if not fortran and not dtype.hasobject and offset + dtype.itemsize * int(np.prod(shape)) <= \
-                info.header_offset + 30 + int(name) + int(extra) + info.file_size:
+        end = offset + dtype.itemsize * int(np.prod(shape))
+        if not fortran and not dtype.hasobject and end <= start + info.file_size:
             return np.memmap(path, dtype, "c", offset, shape)
     with archive.open(member) as f:
         return np.lib.format.read_array(f, allow_pickle=False)
