@@ -2,8 +2,8 @@
 # The gauges of a run on several GPUs against the 1-rank driver's, byte for byte: scenes/dam_break_obstacle_3d.toml
 # (a pier, a body, with a force gauge on it, a pressure and a height gauge; the cuts along z cross the pier) for
 # $STEPS steps (default 800: the front reaches the pier at 0.16 s, about step 380), run on Vulkan by the 1-rank
-# driver on the first GPU and by `sphcore run` on 2 ranks (GPU to GPU, and through host memory), each run's
-# gauges/*.csv and final.npz compared with the 1-rank ones.
+# driver on the first GPU and by `sphcore run` on 2 ranks (GPU to GPU, and through host memory) and on 4 (GPU to
+# GPU; where there are 4 GPUs), each run's gauges/*.csv and final.npz compared with the 1-rank ones.
 # One JSON line a case in $OUT/gauges_gpu.json (default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root with .gl and .whl carried (benchmarks/gpu_env.sh), as benchmarks/peers_gpu.sh.
 set -u -o pipefail
@@ -27,12 +27,13 @@ parallel.run(sphcore.Scene.load('/tmp/gauges/pier.toml'), out_dir='/tmp/gauges/o
              backend='vulkan', overwrite=True)" > "$OUT/gauges_one.log" 2>&1; echo "one: rc=$?"
 run 2 cuda two_cuda
 run 2 host two_host
+[ "$(nvidia-smi --query-gpu=name --format=csv,noheader | wc -l)" -ge 4 ] && run 4 cuda four_cuda
 "$PY" - "$OUT/gauges_gpu.json" <<'EOF'
 import json, sys
 from pathlib import Path
 import numpy as np
 one = Path("/tmp/gauges/one")
-for case in ("two_cuda", "two_host"):
+for case in ("two_cuda", "two_host", "four_cuda"):
     other = Path("/tmp/gauges", case)
     if not (other / "final.npz").exists():
         continue

@@ -171,11 +171,11 @@ class GaugeReader:
         state = np.asarray(backend.read_buffer("gauge_state"))
         taken = state[1::2, 1].astype(np.int64)
         new = taken - self.taken
-        slots = LAYER_SLOTS if layers and any(self.on_body) else GAUGE_SLOTS
+        slots = np.where(np.array(self.on_body, bool) & bool(layers), LAYER_SLOTS, GAUGE_SLOTS)  # (its ring's)
         if (new > slots).any() or (new < 0).any():
             g = int(np.argmax((new > slots) | (new < 0)))
             raise SimulationError(f"gauge {self.names[g]!r}: {int(new[g])} samples since the last read, its ring "
-                                  f"on the device holds {slots}: samples were lost")
+                                  f"on the device holds {slots[g]}: samples were lost")
         rows = [np.zeros((0, 4)) for _ in self.columns]
         sums = [np.zeros((0, layers, 3)) if on_body else None for on_body in self.on_body]
         if new.any():
