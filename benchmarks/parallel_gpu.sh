@@ -30,7 +30,7 @@ for scaling in ${SCALING:-strong weak}; do
         [ "$ranks" = 1 ] && [ "$scaling" = strong ] && args="$args --plain"
         log="$OUT/${scaling}_${ranks}.log"
         # each rank sees its own GPU alone (NVIDIA's Vulkan driver honours CUDA_VISIBLE_DEVICES, set as the process
-        # starts): a rank's kernels ran 3 times slower on a GPU another rank's process also held a context on
+        # starts), as in the runs before; ranks that saw both GPUs stepped as fast (docs/parallel.md)
         nvidia-smi --query-gpu=timestamp,index,clocks.sm,clocks.mem,utilization.gpu,power.draw --format=csv \
             -lms 200 > "$OUT/${scaling}_${ranks}_gpus.csv" & clocks=$!
         # Open MPI copies a large message between two processes once (CMA) rather than twice through a shared
