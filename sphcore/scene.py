@@ -901,11 +901,14 @@ class Scene:
         parts = []
         for i, block in enumerate(self["fluid.blocks"]):
             origin, counts = self._block_lattice(block)
-            axes = [origin[a] + dx * np.arange(k) for a, k in enumerate(counts)]
-            parts.append(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, self.dim))
+            part = np.empty((*counts, self.dim), self._real)  # (each axis' coordinates written across the others)
+            for a, k in enumerate(counts):
+                part[..., a] = (origin[a] + dx * np.arange(k)).astype(self._real).reshape(
+                    [k if b == a else 1 for b in range(self.dim)])
+            parts.append(part.reshape(-1, self.dim))
             if self["bodies"]:
                 parts[-1] = parts[-1][self._geometry()["keep"][i]]
-        return np.concatenate(parts).astype(self._real)
+        return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
     def wall_positions(self):
         """The bodies' wall particles (Adami et al. 2012's dummy particles): positions (N_w, dim) in the scene's

@@ -122,7 +122,7 @@ class Simulation:
         self.fluid_count = len(x0)
         self.buried = geometry.buried_keys(walls, scene["domain.box_min"], scene["domain.box_max"],
                                            scene["fluid.spacing"])  # (health.check_bodies)
-        x0 = np.concatenate([x0, walls]).astype(x0.dtype)
+        x0 = np.concatenate([x0, walls]).astype(x0.dtype, copy=False)
         ids = np.arange(len(x0)) if keep is None else np.flatnonzero(keep)
         x0 = x0[ids] if keep is not None else x0
         self.n, self.dim = len(x0), scene.dim
