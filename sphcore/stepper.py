@@ -14,6 +14,7 @@ from sphcore.backends import check_options, make_backend
 from sphcore.checkpoint import CARRIED
 from sphcore.errors import CheckpointError, SimulationError
 from sphcore.output import SnapshotSeries
+from sphcore.params import PARAMS_DTYPE
 from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, density_stages, empty_state, in_particle_order, plan
 from sphcore.signals import HeldInterrupt
 from sphcore.solvers import solver_for
@@ -126,7 +127,7 @@ class Simulation:
         ids = np.arange(len(x0)) if keep is None else np.flatnonzero(keep)
         x0 = x0[ids] if keep is not None else x0
         self.n, self.dim = len(x0), scene.dim
-        self.params = scene.params(self.n, self.fluid_count)
+        self.params, self._params_bytes = scene.params(self.n, self.fluid_count), None
         self.spec = scene.spec_for(backend)._replace(ID_ORDER=id_order)  # (the state equation's lists: spec_for)
         counts = np.bincount(self.wall_body, minlength=len(scene.bodies)).tolist()
         firsts = (self.fluid_count + np.cumsum([0] + counts[:-1])).tolist()
@@ -338,8 +339,13 @@ class Simulation:
         self.backend.resize(self._count(n, owned_cells))
 
     def params_of(self, n, owned_cells=(0, 0)):
-        """The parameter block of n particles (the fluid's first) and `owned_cells` (load's)."""
-        params = self.scene.params(n, self.fluid_count)
+        """The parameter block of n particles (the fluid's first) and `owned_cells` (load's): the bytes of the scene's
+        block, made once (scene.params: 75 us, which a rank of sphcore.parallel would spend every step), with those
+        set. (A byte copy: a record's copy() leaves its padding unset, and a checkpoint keeps every byte.)"""
+        if self._params_bytes is None:
+            self._params_bytes = self.scene.params(0, self.fluid_count).tobytes()
+        params = np.frombuffer(bytearray(self._params_bytes), PARAMS_DTYPE)
+        params[0]["n"] = n
         params[0]["owned_first"], params[0]["owned_end"] = owned_cells
         return params
 
