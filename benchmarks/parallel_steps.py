@@ -1,5 +1,6 @@
 """The decomposed step (sphcore.parallel) against a plain Simulation's, and what its exchange costs, on the numba
-backend: `mpiexec -n N python benchmarks/parallel_steps.py [--spacing 0.005] [--steps 50] [--out FILE]`.
+backend (or --backend vulkan: on lavapipe, at a coarse --spacing, what the host spends a step):
+`mpiexec -n N python benchmarks/parallel_steps.py [--spacing 0.005] [--steps 50] [--backend numba] [--out FILE]`.
 
 A 2D dam break (dam_break_2d at `--spacing`), each rank building its share (parallel.share), warmed up by 5 steps,
 then `--steps` steps timed: on every rank the driver's step split as Rank.seconds splits it (the exchange and its
@@ -22,13 +23,14 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--spacing", type=float, default=0.005)
     parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--backend", default="numba", choices=("numba", "vulkan"))
     parser.add_argument("--out")
     args = parser.parse_args()
     world = MPI.COMM_WORLD
     base = sphcore.Scene.load("dam_break_2d").config
     scene = sphcore.Scene.from_dict({**base, "fluid": {**base["fluid"], "spacing": args.spacing}})
     cuts, keep = parallel.share(scene, world.Get_size(), world.Get_rank())
-    with sphcore.Simulation(scene, id_order=True, keep=keep) as sim:
+    with sphcore.Simulation(scene, args.backend, id_order=True, keep=keep) as sim:
         rank = parallel.Rank(sim, world, cuts)
         for _ in range(5):
             rank.step()
@@ -48,11 +50,12 @@ def main():
                          "owned": int(end - first), "held_mean": held / args.steps}, root=0)
     if world.Get_rank() != 0:
         return
-    result = {"ranks": world.Get_size(), "particles": scene.particle_count(), "spacing": args.spacing,
+    result = {"ranks": world.Get_size(), "backend": args.backend, "particles": scene.particle_count(),
+              "spacing": args.spacing,
               "steps": args.steps, "per_rank": rows, "machine": platform.node(),
               "mpi": MPI.Get_library_version().split(",")[0], "numba_threads": numba.config.NUMBA_NUM_THREADS}
     for key, id_order in (("plain_ms_per_step", False), ("plain_id_order_ms_per_step", True)):
-        with sphcore.Simulation(scene, id_order=id_order) as sim:
+        with sphcore.Simulation(scene, args.backend, id_order=id_order) as sim:
             sim.step(5)
             start = time.perf_counter()
             sim.step(args.steps)

@@ -360,6 +360,7 @@ class VulkanBackend:
         """`before_allocating(ctx)`: called once the device is chosen, before any buffer is made
         (sphcore.Simulation checks there that lavapipe's buffers fit in host memory)."""
         self.dtypes = {name: buffer_dtype(name, precision) for name in BUFFERS}
+        self.row_bytes = {name: BUFFERS[name][1] * self.dtypes[name].itemsize for name in BUFFERS}  # (a row's bytes)
         self.defines = ("SPHCORE_FLOAT64",) if precision == "float64" else ()
         self.ctx = Context(device=device, validation=validation, float64=precision == "float64")
         if before_allocating is not None:
@@ -591,18 +592,15 @@ class VulkanBackend:
         for name, values in particles.items():
             self.write_buffer(name, values)
 
-    def _row_bytes(self, name):
-        return int(np.prod(self.shapes[name][1:])) * self.dtypes[name].itemsize
-
     def read_rows(self, name, start, stop):
         """Rows start .. stop - 1 of a buffer, read back from the device."""
         shape = (max(stop - start, 0), *self.shapes[name][1:])
-        return self.buffers[name].read(self.dtypes[name], shape, start * self._row_bytes(name))
+        return self.buffers[name].read(self.dtypes[name], shape, start * self.row_bytes[name])
 
     def write_rows(self, name, start, values):
         """Set a buffer's rows from `start` on to `values`, on the device."""
         array = np.asarray(values, self.dtypes[name]).reshape(-1, *self.shapes[name][1:])
-        self.buffers[name].write(array, start * self._row_bytes(name))
+        self.buffers[name].write(array, start * self.row_bytes[name])
         self._known.pop(name, None)
 
     def read_regions(self, regions, into=None):
@@ -612,7 +610,7 @@ class VulkanBackend:
         overwrites (the bytes between regions unset)."""
         copies, at = [], 0
         for name, start, stop in regions:
-            size = self._row_bytes(name)
+            size = self.row_bytes[name]
             copies.append((self.buffers[name], start * size, at, (stop - start) * size))
             at += packed((stop - start) * size)
         return self.ctx.read_regions(copies, at, into)
@@ -639,7 +637,7 @@ class VulkanBackend:
         for data, regions in parts:
             copies = []
             for name, row, offset, count in regions:
-                size = self._row_bytes(name)
+                size = self.row_bytes[name]
                 copies.append((self.buffers[name], offset, row * size, count * size))
                 self._known.pop(name, None)
             copied.append((data, copies))
@@ -659,7 +657,7 @@ class VulkanBackend:
         copies = []
         for name in sized_shapes(self.params, self.spec) if count > 0 else ():
             if BUFFERS[name][2] == "particles":
-                buffer, size = self.buffers[name].buffer, self._row_bytes(name)
+                buffer, size = self.buffers[name].buffer, self.row_bytes[name]
                 copies.append((buffer, buffer, [(source * size, destination * size, count * size)]))
         return copies
 

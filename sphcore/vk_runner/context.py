@@ -58,7 +58,8 @@ DEVICE_TYPE_RANK = ("DISCRETE_GPU", "INTEGRATED_GPU", "VIRTUAL_GPU", "CPU", "OTH
 class Buffer:
     """A storage buffer in device-local memory (`uniform`: a uniform buffer); host-mapped where that
     memory is host-visible, which a uniform buffer and a `mapped` one are where the device has such memory (then
-    the host writes and reads it with no submission)."""
+    the host writes and reads it with no submission, through `bytes`, a view of it mapped while it lives: a map and
+    an unmap an access cost about 20 us of Python, several times a step)."""
 
     def __init__(self, ctx, nbytes, name, uniform=False, mapped=False):
         vk = ctx.vk
@@ -73,14 +74,16 @@ class Buffer:
                                                                | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT)
         self.buffer, self.memory, self.host_visible = ctx._allocate(self.nbytes, usage, local, name,
                                                                     local | host if uniform or mapped else 0)
+        self.bytes = np.frombuffer(ctx._map(self.memory, self.nbytes), np.uint8, self.nbytes) \
+            if self.host_visible else None
 
     @classmethod
     def bound(cls, ctx, nbytes, name, buffer, memory):
         """A Buffer over a VkBuffer and the memory bound to it, made elsewhere (Context.host_buffer's,
         exported_buffer's): copied into and out of, not mapped."""
         made = cls.__new__(cls)
-        made.ctx, made.nbytes, made.name, made.buffer, made.memory, made.host_visible = (
-            ctx, nbytes, name, buffer, memory, False)
+        made.ctx, made.nbytes, made.name, made.buffer, made.memory, made.host_visible, made.bytes = (
+            ctx, nbytes, name, buffer, memory, False, None)
         return made
 
     def write(self, array, offset=0):
@@ -91,7 +94,7 @@ class Buffer:
         if data.nbytes == 0:
             return
         if self.host_visible:
-            self.ctx._write_mapped(self.memory, data, offset)
+            self.bytes[offset:offset + data.nbytes] = data.reshape(-1).view(np.uint8)
         else:
             staging = self.ctx._staging(data.nbytes)
             staging.bytes[:data.nbytes] = data.reshape(-1).view(np.uint8)
@@ -104,7 +107,7 @@ class Buffer:
         if nbytes == 0:
             return np.zeros(shape, dtype)
         if self.host_visible:
-            return self.ctx._read_mapped(self.memory, nbytes, offset).view(dtype).reshape(shape)
+            return self.bytes[offset:offset + nbytes].copy().view(dtype).reshape(shape)
         staging = self.ctx._staging(nbytes)
         self.ctx._copy(self.buffer, staging.buffer, [(offset, 0, nbytes)])
         out = staging.bytes[:nbytes].copy().view(dtype).reshape(shape)
@@ -120,6 +123,9 @@ class Buffer:
     def free(self):
         if self.buffer is not None:
             vk = self.ctx.vk
+            if self.bytes is not None:
+                self.bytes = None  # (the view dies before its memory is unmapped)
+                vk.vkUnmapMemory(self.ctx.device, self.memory)
             vk.vkDestroyBuffer(self.ctx.device, self.buffer, None)
             vk.vkFreeMemory(self.ctx.device, self.memory, None)
             self.buffer = self.memory = None
@@ -138,12 +144,6 @@ class _Staging(Buffer):
         self.buffer, self.memory, self.host_visible = ctx._allocate(nbytes, usage, flags, "staging",
                                                                     flags | vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT)
         self.bytes = np.frombuffer(ctx._map(self.memory, nbytes), np.uint8, nbytes)
-
-    def free(self):
-        if self.buffer is not None:
-            self.bytes = None  # (the view dies before its memory is unmapped)
-            self.ctx.vk.vkUnmapMemory(self.ctx.device, self.memory)
-        super().free()
 
 
 class Pipeline:
@@ -652,19 +652,6 @@ class Context:
         except (vk.VkErrorMemoryMapFailed, vk.VkErrorDeviceLost, vk.VkErrorOutOfHostMemory) as e:
             raise VulkanError(f"could not map {nbytes / 2**20:.1f} MiB of memory on {self.device_name} "
                               f"({type(e).__name__}): use fewer particles or --backend numba") from None
-
-    def _write_mapped(self, memory, data, offset=0):
-        vk = self.vk
-        mapped = self._map(memory, data.nbytes, offset)
-        vk.ffi.memmove(mapped, vk.ffi.from_buffer(data), data.nbytes)
-        vk.vkUnmapMemory(self.device, memory)
-
-    def _read_mapped(self, memory, nbytes, offset=0):
-        vk = self.vk
-        mapped = self._map(memory, nbytes, offset)
-        out = np.frombuffer(mapped, np.uint8, nbytes).copy()  # copy before the view dies with unmap
-        vk.vkUnmapMemory(self.device, memory)
-        return out
 
     def _staging(self, nbytes, use="copy", most=STAGING_MOST):
         """Host-visible memory for a copy of `nbytes`: one buffer kept for each `use` (copies, the rows read
