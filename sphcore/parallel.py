@@ -28,7 +28,7 @@ writes RUN/gauges/*.csv as one rank does. At a snapshot each rank checks its own
 the ranks (a failure more than a step after the last good check replayed from it, to name the first bad step).
 SIGINT or SIGTERM on any rank stops every rank at one step, after a checkpoint.
 Progress and messages come from rank 0. An error on any rank stops every rank (MPI Abort) after printing the
-rank's message.
+rank's message; a scene every rank refuses (check) is refused in one line by rank 0, and every rank exits.
 
 N ranks give bitwise the state of a Simulation with id_order on one process (tests/test_parallel.py). A plain
 Simulation orders a cell's particles by their previous index, not their id, so its sums run in another order: a
@@ -114,6 +114,10 @@ PIECE = 1 << 26
 
 class Stopped(Interrupted):
     """A signal stopped every rank at the same step, after a checkpoint (run): rank 0 says so, the others exit."""
+
+
+class Refused(SceneError):
+    """Every rank refuses the run before it starts (check, on each): rank 0 says why, once, and every rank exits."""
 
 
 # What a halo particle sends: what a step reads of a neighbour before writing it. compute_density and compute_forces
@@ -680,7 +684,16 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
     the others. On Vulkan each rank runs on `device` (an index or part of a name), by default its host's rank-th
     GPU (rank_device)."""
     comm = comm or world()
-    check(scene, backend)
+    refused = None
+    try:
+        check(scene, backend)
+    except SceneError as e:
+        refused = str(e)
+    refused = comm.allgather(refused)  # (the same on every rank but where the environment differs)
+    if any(refused):
+        first = next(r for r, why in enumerate(refused) if why)
+        same = all(why == refused[first] for why in refused)
+        raise Refused(refused[first] if same else f"rank {first} of {comm.Get_size()}: {refused[first]}")
     options = {"local_size": local_size}
     if backend == "vulkan":
         from mpi4py import MPI
@@ -772,11 +785,15 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
 
 def main(run_args):
     """`sphcore run` under mpiexec: run_args (scene, steps, out, overwrite, local_size, backend, device) on every
-    rank; an error on a rank prints `rank R: message` and aborts every rank. A signal stops every rank at one step
-    (Stopped): rank 0 says so, the others exit with the same status."""
+    rank; an error on a rank prints `rank R: message` and aborts every rank. A scene every rank refuses (Refused) and
+    a signal, which stops every rank at one step (Stopped): rank 0 says so, the others exit with the same status."""
     comm = world()
     try:
         return run(**run_args, comm=comm)
+    except Refused as e:
+        if comm.Get_rank() == 0 or comm.Get_size() == 1:
+            raise
+        sys.exit(1)
     except Stopped as e:
         if comm.Get_rank() == 0 or comm.Get_size() == 1:
             raise
