@@ -25,6 +25,11 @@ class MemoryLimitError(SceneError):
     """A run that would not fit in the memory available; the message gives both figures and what would fit."""
 
 
+class RefusedByRanks(SceneError):
+    """A run every rank of sphcore.parallel refuses before it starts (parallel.check, on each): rank 0 says why, once,
+    and every rank exits."""
+
+
 class ResultsError(SceneError):
     """A results file that cannot be used; the message names it and says what is wrong with it (`why`)."""
 

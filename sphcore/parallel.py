@@ -48,7 +48,7 @@ from sphcore import decomposition, folder, gauges, health
 from sphcore.backends import packed
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CARRIED, CHECKPOINT
-from sphcore.errors import Interrupted, SceneError, SimulationError
+from sphcore.errors import Interrupted, RefusedByRanks, SceneError, SimulationError
 from sphcore.gauges import GAUGE_SLOTS, LAYER_SLOTS, GaugeFiles
 from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
 from sphcore.peers import Peers
@@ -114,10 +114,6 @@ PIECE = 1 << 26
 
 class Stopped(Interrupted):
     """A signal stopped every rank at the same step, after a checkpoint (run): rank 0 says so, the others exit."""
-
-
-class Refused(SceneError):
-    """Every rank refuses the run before it starts (check, on each): rank 0 says why, once, and every rank exits."""
 
 
 # What a halo particle sends: what a step reads of a neighbour before writing it. compute_density and compute_forces
@@ -693,7 +689,7 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
     if any(refused):
         first = next(r for r, why in enumerate(refused) if why)
         same = all(why == refused[first] for why in refused)
-        raise Refused(refused[first] if same else f"rank {first} of {comm.Get_size()}: {refused[first]}")
+        raise RefusedByRanks(refused[first] if same else f"rank {first} of {comm.Get_size()}: {refused[first]}")
     options = {"local_size": local_size}
     if backend == "vulkan":
         from mpi4py import MPI
@@ -785,12 +781,13 @@ def run(scene, steps=None, out_dir=None, progress=True, overwrite=False, comm=No
 
 def main(run_args):
     """`sphcore run` under mpiexec: run_args (scene, steps, out, overwrite, local_size, backend, device) on every
-    rank; an error on a rank prints `rank R: message` and aborts every rank. A scene every rank refuses (Refused) and
-    a signal, which stops every rank at one step (Stopped): rank 0 says so, the others exit with the same status."""
+    rank; an error on a rank prints `rank R: message` and aborts every rank. A scene every rank refuses
+    (RefusedByRanks) and a signal, which stops every rank at one step (Stopped): rank 0 says so, the others exit
+    with the same status."""
     comm = world()
     try:
         return run(**run_args, comm=comm)
-    except Refused as e:
+    except RefusedByRanks:
         if comm.Get_rank() == 0 or comm.Get_size() == 1:
             raise
         sys.exit(1)
