@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from sphcore.params import DISPATCH_DTYPE, PARAMS_BINDING, SHADER_DIR, UNIFORM_BYTES
-from sphcore.plan import BUFFERS, STAGES, STATUS_CLEAR, buffer_dtype
+from sphcore.plan import BUFFERS, STAGES, STATUS_CLEAR, buffer_dtype, row_bytes
 from sphcore.plan import (PARTICLE_BUFFERS, PRECISIONS, REAL, buffer_length, empty_state,  # noqa: F401 (the plan
                           in_particle_order, list_entries, neighbour_stages, plan)  # and buffers' old paths)
 from sphcore.solvers.dfsph import dfsph_solve
@@ -360,7 +360,7 @@ class VulkanBackend:
         """`before_allocating(ctx)`: called once the device is chosen, before any buffer is made
         (sphcore.Simulation checks there that lavapipe's buffers fit in host memory)."""
         self.dtypes = {name: buffer_dtype(name, precision) for name in BUFFERS}
-        self.row_bytes = {name: BUFFERS[name][1] * self.dtypes[name].itemsize for name in BUFFERS}  # (a row's bytes)
+        self.row_bytes = {name: row_bytes(name, precision) for name in BUFFERS}
         self.defines = ("SPHCORE_FLOAT64",) if precision == "float64" else ()
         self.ctx = Context(device=device, validation=validation, float64=precision == "float64")
         if before_allocating is not None:

@@ -157,6 +157,11 @@ class GaugeReader:
         self.on_body = [g["quantity"] in ON_BODY for g in scene.config["gauges"]]
         self.since = 0
 
+    def slots(self, layers=0):
+        """The samples each gauge's ring on the device holds: GAUGE_SLOTS, or with `layers` (on a rank) LAYER_SLOTS
+        for a force or moment, whose layers' sums gauge_layers keeps."""
+        return np.where(np.array(self.on_body, bool) & bool(layers), LAYER_SLOTS, GAUGE_SLOTS)
+
     def read(self, backend):
         return self.kept(self.samples(backend))
 
@@ -171,7 +176,7 @@ class GaugeReader:
         state = np.asarray(backend.read_buffer("gauge_state"))
         taken = state[1::2, 1].astype(np.int64)
         new = taken - self.taken
-        slots = np.where(np.array(self.on_body, bool) & bool(layers), LAYER_SLOTS, GAUGE_SLOTS)  # (its ring's)
+        slots = self.slots(layers)
         if (new > slots).any() or (new < 0).any():
             g = int(np.argmax((new > slots) | (new < 0)))
             raise SimulationError(f"gauge {self.names[g]!r}: {int(new[g])} samples since the last read, its ring "

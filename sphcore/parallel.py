@@ -49,10 +49,10 @@ from sphcore.backends import packed
 from sphcore.decomposition import SIZE_VARIABLES, launched_ranks  # noqa: F401 (sphcore.parallel's)
 from sphcore.checkpoint import CARRIED, CHECKPOINT
 from sphcore.errors import Interrupted, RefusedByRanks, SceneError, SimulationError
-from sphcore.gauges import GAUGE_SLOTS, LAYER_SLOTS, GaugeFiles
+from sphcore.gauges import GaugeFiles
 from sphcore.output import SnapshotSeries, vtp_bytes, write_vtp
 from sphcore.peers import Peers
-from sphcore.plan import BUFFERS, PARTICLE_BUFFERS, PICK_ENTRIES, buffer_dtype, in_particle_order
+from sphcore.plan import PARTICLE_BUFFERS, PICK_ENTRIES, buffer_dtype, in_particle_order, row_bytes
 from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
 from sphcore.stage import Stage
@@ -249,7 +249,7 @@ class Rank:
         self.axis, self.layers, self.per_layer, self.reach = (self.slabs.axis, self.slabs.layers,
                                                               self.slabs.per_layer, self.slabs.reach)
         precision = sim.scene["physics.precision"]
-        self.row_bytes = {name: buffer_dtype(name, precision).itemsize * BUFFERS[name][1] for name in LOADED}
+        self.row_bytes = {name: row_bytes(name, precision) for name in LOADED}
         self.sent = sent_buffers(sim.scene.spec)
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
@@ -294,7 +294,7 @@ class Rank:
         ([4]), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
-            if self.sim.gauges.since >= (LAYER_SLOTS if any(self.sim.gauges.on_body) else GAUGE_SLOTS):
+            if self.sim.gauges.since >= self.sim.gauges.slots(self.layers).min():
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()

@@ -225,6 +225,11 @@ def buffer_dtype(name, precision="float32"):
     return np.dtype(precision if dtype == REAL else dtype)
 
 
+def row_bytes(name, precision="float32"):
+    """The bytes of one row (a particle's, a cell's, ...) of buffer `name` at `precision`."""
+    return buffer_dtype(name, precision).itemsize * BUFFERS[name][1]
+
+
 def buffer_length(length, params, max_neighbours=0, gradients=False, gauges=0):
     """Elements of a buffer of BUFFERS' `length` for the parameter block `params` (and the
     spec.MAX_NEIGHBOURS list slots a particle; `gradients`: DFSPH stores their gradients, spec.GRADIENTS;

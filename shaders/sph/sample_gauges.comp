@@ -174,12 +174,12 @@ void main() {
         uint layers = GRID ? P.grid_dim[DIM - 1u] : 1u;
         uint per_layer = P.cell_total / layers;
         uint row = (g * LAYER_SLOTS + progress.y % LAYER_SLOTS) * layers;
-        for (uint l = 0u; l < layers; ++l) {
+        for (uint layer = 0u; layer < layers; ++layer) {
             real3 layer_force = real3(0.0);
             precise real3 layer_moment = real3(0.0);
-            bool mine = P.owned_end == 0u || (l * per_layer >= P.owned_first && l * per_layer < P.owned_end);
-            uint first = GRID ? layer_start[l] : 0u;
-            uint end = l + 1u < layers ? layer_start[l + 1u] : P.n;
+            bool mine = P.owned_end == 0u || (layer * per_layer >= P.owned_first && layer * per_layer < P.owned_end);
+            uint first = GRID ? layer_start[layer] : 0u;
+            uint end = layer + 1u < layers ? layer_start[layer + 1u] : P.n;
             for (uint i = first; mine && i < end; ++i) {
                 if (particle_id[i] - kind.y >= kind.z) continue;  // (not the body's: unsigned, below first too)
                 real3 a = particle_a[i].xyz;
@@ -189,7 +189,7 @@ void main() {
             }
             force += layer_force;
             moment += layer_moment;
-            if (P.owned_end > 0u) gauge_layers[row + l] = real4(kind.x == FORCE ? layer_force : layer_moment, 0.0);
+            if (P.owned_end > 0u) gauge_layers[row + layer] = real4(kind.x == FORCE ? layer_force : layer_moment, 0.0);
         }
         real mass = real(gauge_table[2u * g + 1u].w);
         value.xyz = mass * (kind.x == FORCE ? force : moment);
