@@ -256,9 +256,10 @@ class NumbaBackend:
     def move_rows(self, source, destination, count):
         """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. (the two
         runs must not overlap)."""
-        for name in sized_shapes(self.params, self.spec):
+        for name in sized_shapes(self.params, self.spec):  # (past the count too: the rows held before a resize)
             if BUFFERS[name][2] == "particles":
-                self.state[name][destination:destination + count] = self.state[name][source:source + count]
+                whole = self.store.get(name, self.state[name])
+                whole[destination:destination + count] = whole[source:source + count]
 
     def _launcher(self, name):
         launch = STAGES[name][0](self.spec, self.real)
@@ -294,8 +295,10 @@ class NumbaBackend:
         launch(self._launch_groups(self._groups(stage), stage.when), self.local_size,
                stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
-    def run_stages(self, stages):
-        """`stages` in order, as run_stage runs each."""
+    def run_stages(self, stages, writes=None):
+        """`stages` in order, as run_stage runs each; with `writes` ((parts, move): write_parts') first."""
+        if writes is not None:
+            self.write_parts(*writes)
         for stage in stages:
             self.run_stage(stage)
 
@@ -455,9 +458,13 @@ class VulkanBackend:
             self._recordings[key] = rec.end()
         return self._recordings[key]
 
-    def _submit(self, rec):
+    def _submit(self, rec, writes=None):
+        """Run recording `rec`; with `writes` ((parts, move): write_parts') first, in the same submission."""
         self._known.clear()
-        self.ctx.submit(rec)
+        if writes is None:
+            self.ctx.submit(rec)
+        else:
+            self.ctx.write_parts(*self._copied(*writes), then=rec)
         if rec.timer is not None:
             for stage, seconds in zip(rec.stages, rec.timer.seconds()):
                 self.profile.add(profile_name(stage), seconds)
@@ -527,13 +534,13 @@ class VulkanBackend:
         self._pipeline(stage.name)
         self._submit(self._recording(1, [stage]))
 
-    def run_stages(self, stages):
+    def run_stages(self, stages, writes=None):
         """`stages` in order, in one submission (recorded once, as a step is); timed stage by stage where there is a
-        profile."""
+        profile. With `writes` ((parts, move): write_parts'), those first, in the same submission."""
         stages = [s if isinstance(s, Stage) else Stage(s) for s in stages]
         for stage in stages:
             self._pipeline(stage.name)
-        self._submit(self._recording(1, stages, timed=self.profile is not None))
+        self._submit(self._recording(1, stages, timed=self.profile is not None), writes)
 
     def resize(self, params):
         """Hold `params`' count of particles in place: the buffers keep their size while the count fits (the
@@ -633,6 +640,10 @@ class VulkanBackend:
     def write_parts(self, parts, move=None):
         """write_regions of each (data, regions) of `parts`, in one submission: each `data` host_buffer's, or one
         host array (uint8) for them all; with move_rows(*move) where given (rows the writes do not touch)."""
+        self.ctx.write_parts(*self._copied(parts, move))
+
+    def _copied(self, parts, move=None):
+        """write_parts' copies, as Context.write_parts takes them: (parts, copies_first)."""
         copied = []
         for data, regions in parts:
             copies = []
@@ -641,9 +652,9 @@ class VulkanBackend:
                 copies.append((self.buffers[name], offset, row * size, count * size))
                 self._known.pop(name, None)
             copied.append((data, copies))
-        self.ctx.write_parts(copied, self._moves(*move) if move else ())
         if move:
             self._known = {}
+        return copied, self._moves(*move) if move else ()
 
     def move_rows(self, source, destination, count):
         """Copy rows source .. source + count - 1 of every per-particle buffer to rows destination .. on the

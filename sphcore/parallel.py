@@ -57,6 +57,7 @@ from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
 from sphcore.stage import Stage
 from sphcore.sph.dfsph import CONTROL_REBUILD
+from sphcore.sph.pick_rows import PICK_ALIGN
 from sphcore.stepper import LOADED, Simulation, wall_particles
 from sphcore.vk_runner import Context
 
@@ -123,10 +124,10 @@ class Stopped(Interrupted):
 # not kept). What a particle the receiver owns from now on (a migrant) sends: those, and Verlet's particle_vh (never
 # written without Verlet: zero in every row); DFSPH's particle_kappa (zero without DFSPH, which a run on several
 # ranks refuses: check) and the two a step writes before it reads them, particle_a and particle_p, stay.
-# pick_rows.comp packs them into the sort's scratch buffers (PACKED), Verlet's particle_vh into particle_a.
+# pick_rows.comp packs them into the sort's scratch buffers and scratch_vh (PACKED).
 HALO = ("particle_x", "particle_v", "particle_rho", "particle_id")
 PACKED = {"particle_x": "scratch_x", "particle_v": "scratch_v", "particle_rho": "scratch_rho",
-          "particle_id": "scratch_id", "particle_vh": "particle_a"}
+          "particle_id": "scratch_id", "particle_vh": "scratch_vh"}
 
 
 def sent_buffers(spec):
@@ -253,6 +254,8 @@ class Rank:
         self.sent = sent_buffers(sim.scene.spec)
         self.total = sim.scene.particle_count()
         self.cuts = np.asarray(cuts)
+        self.next_cuts = self.cuts.copy()  # (the slabs of the step after the next: pick's)
+        self.entries = self.picked = None  # (pick's table, and its counts after the step that picked)
         self.start_owned = self.held_owned()  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         exchange = os.environ.get("SPHCORE_MPI_EXCHANGE", "")
@@ -270,6 +273,7 @@ class Rank:
         start. The energy bound is the scene's initial state's, gathered first (gather)."""
         x = checkpoint["buffer_particle_x"]
         self.cuts, keep = share(self.sim.scene, self.size, self.rank, x=x[:, :self.sim.dim])
+        self.next_cuts, self.picked = self.cuts.copy(), None
         self.sim.restore(checkpoint, keep, self.owned_cells())
         self.start_owned, self.starts = self.held_owned(), None
         self.keep()  # (the checkpoint's state, checked when it was written: a replay's start)
@@ -290,26 +294,30 @@ class Rank:
 
     def step(self):
         """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
-        `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the rows written), stages
-        ([4]), dt (the partials read back and their Allreduce)."""
+        `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the new halo's copies listed),
+        stages ([4], the new halo written first in the same submission, and where it can, the pick of the rows the
+        next step's exchange sends: its last stage), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
             if self.sim.gauges.since >= self.sim.gauges.slots(self.layers).min():
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
-        if self.starts is not None:
-            self.exchange()  # [1]-[3]
+        writes = self.exchange() if self.starts is not None else None  # [1]-[3]
+        self.write_pick()
+        pick = [Stage("pick_rows")]
         start = self.lap("exchange", start)
         backend = self.sim.backend
-        backend.run_stages(self.before_dt)  # [4]
-        start = self.lap("stages", start)
-        if self.adaptive:
+        if self.adaptive:  # [4]
+            backend.run_stages(self.before_dt, writes)
+            start = self.lap("stages", start)
             self.reduce_dt(MPI)
             start = self.lap("dt", start)
-        if self.after_dt:
-            backend.run_stages(self.after_dt)
+            backend.run_stages(self.after_dt + pick)
+        else:
+            backend.run_stages(self.before_dt + pick, writes)
         self.starts = np.append(backend.read_rows("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
+        self.picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
         self.lap("stages", start)
         self.sim.step_count += 1
 
@@ -346,45 +354,46 @@ class Rank:
         backend.write_rows("dt_partial", 0, largest[None])
 
     def exchange(self):
-        """[1]-[3] after a step: the owned particles per layer summed over the ranks (Allreduce; their total is
-        checked: none lost, none twice) and the new cuts, each moved a layer at most; to each other rank the rows
-        of this one's slab it owns from now on or sees as halo, picked and packed on the device (pick), read back in
-        one copy into the ranks' shared memory (swap_shared) or sent in one Alltoallv (swap); the received ones
-        replace the old halo, in one copy. The owned rows stay where they are:
+        """[1]-[3] after a step: the rows of this rank's slab each other rank needs (pick: those picked at the end of
+        the step, or picked now), and the owned particles per layer and those rows of every rank (one Allgather; the
+        owned particles' total is checked: none lost, none twice); the rows copied from the device into the ranks'
+        shared memory (swap_shared), from GPU to GPU (swap_peers) or sent in one Alltoallv (swap). The cuts the pick
+        took become the slabs, and the next ones are balanced on the counts, each cut moved a layer at most. Returns
+        the copies (write_parts' parts and move) that write the received rows over the old halo, which the step's
+        stages run after in one submission (the rows resized first). The owned rows stay where they are:
         one that another rank owns now stays a step, farther than the halo's width from every particle this rank
         owns (its halo rows are replaced at the next step); the sort puts every cell in id order whatever the rows
         (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
-        from mpi4py import MPI
-        r, backend, starts, start = self.rank, self.sim.backend, self.starts, time.perf_counter()
+        r, starts, start = self.rank, self.starts, time.perf_counter()
         lo, hi = self.cuts[r], self.cuts[r + 1]
         first, end = self.owned_rows()
-        counts = np.zeros(self.layers, np.int64)
-        counts[lo:hi] = np.diff(starts)[lo:hi]
-        self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
+        regions, rows = self.pick()
+        mine = np.zeros(self.layers + 2 * self.size, np.int64)  # (this rank's owned particles per layer, its rows)
+        mine[lo:hi] = np.diff(starts)[lo:hi]
+        mine[self.layers:] = rows.reshape(-1)
+        every = np.empty((self.size, len(mine)), np.int64)
+        self.comm.Allgather(mine, every)
+        counts, every = every[:, :self.layers].sum(axis=0), every[:, self.layers:].reshape(self.size, self.size, 2)
         if counts.sum() != self.total:
             raise SimulationError(f"step {self.sim.step_count}: the ranks own {counts.sum()} particles, not "
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
-        cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1, reach=self.reach)
         start = self.lap("counts", start)
-        # [2] the rows each other rank needs, picked and packed on the device, copied and sent
-        regions, rows = self.pick(cuts)
+        # [2] the rows each other rank needs, copied and sent
         swap = self.swap_peers if self.peers else self.swap_shared if self.shared else self.swap
-        received_rows, sources, start = swap(regions, rows, start)
+        received_rows, sources, start = swap(regions, every, start)
         # [3] the new halo in the rows of the old: below the owned rows, then after them
         m, owned = int(received_rows.sum()), end - first
         move = None
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
             moved = min(first - m, owned)
             move = end - moved, m, moved
-        self.cuts = cuts
-        # a resize only where the count or the slab changed, or to have reused lists built; before the rows are
-        # written where the count grows, after where it shrinks (the rows moved are of the old count)
+        self.cuts = self.next_cuts
+        self.next_cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1, reach=self.reach)
+        # a resize only where the count or the slab changed, or to have reused lists built (the rows moved and
+        # written are listed by row: the buffers keep the rows past a smaller count)
         P, n = self.sim.params[0], m + owned
-        resize = n != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or \
-            self.sim.scene.spec.LIST_SKIN
-        if resize and n > self.sim.n:
+        if n != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
             self.sim.resize(n, self.owned_cells())
-            resize = False
         at, parts = 0, {}  # (every rank's rows in one submission, with the move: its memory's regions)
         for q_rows, (data, offset) in zip(received_rows, sources):
             regions = parts.setdefault(id(data), (data, []))[1]
@@ -396,22 +405,19 @@ class Rank:
                                                             count - below)]
                     offset += packed(count * size)
                 at += count
-        backend.write_parts(list(parts.values()), move)
-        if resize:
-            self.sim.resize(n, self.owned_cells())
         self.lap("write", start)
+        return list(parts.values()), move
 
-    def swap(self, regions, rows, start):
-        """Send each rank its rows: `regions` read back (rank by rank, `rows` of migrants and of halo for each), the
-        rows every rank sends this one (one Alltoall) and their bytes (one Alltoallv: byte counts are 32-bit, so under
-        2 GiB from one rank to another). Returns the rows received from each rank (ranks x 2), and for each rank
-        where its bytes are (host memory, the offset there), and the time."""
+    def swap(self, regions, every, start):
+        """Send each rank its rows: `regions` read back (rank by rank, `every`[s, q]: the rows of migrants and of halo
+        rank s sends rank q), their bytes in one Alltoallv (byte counts are 32-bit, so under 2 GiB from one rank to
+        another). Returns the rows received from each rank (ranks x 2), and for each rank where its bytes are (host
+        memory, the offset there), and the time."""
         from mpi4py import MPI
         sent = self.sim.backend.read_regions(regions)
         start = self.lap("rows", start)
-        received_rows = np.empty_like(rows)
-        self.comm.Alltoall(rows, received_rows)
-        send_bytes, receive_bytes = self.packed_bytes(rows), self.packed_bytes(received_rows)
+        received_rows = every[:, self.rank]
+        send_bytes, receive_bytes = self.packed_bytes(every[self.rank]), self.packed_bytes(received_rows)
         received = self.sim.backend.space_to_write(int(receive_bytes.sum()))
         offsets = np.cumsum(receive_bytes) - receive_bytes
         self.comm.Alltoallv([sent, (send_bytes, np.cumsum(send_bytes) - send_bytes), MPI.BYTE],
@@ -423,33 +429,29 @@ class Rank:
         multiple of backends.PACK_GRAIN bytes), in pick's order."""
         return sum(packed(rows[..., k] * self.row_bytes[name]) for k, names in enumerate(self.sent) for name in names)
 
-    def every_rows(self, rows):
-        """The rows every rank sends every other (one Allgather of each rank's `rows`: ranks x ranks x 2), the
-        bytes rank s sends rank q, and where those start among rank s's."""
-        every = np.empty((self.size, *rows.shape), np.int64)
-        self.comm.Allgather(rows, every)
+    def offsets(self, every):
+        """Of `every` (the rows rank s sends rank q: ranks x ranks x 2), the bytes rank s sends rank q, and where those
+        start among rank s's."""
         sizes = self.packed_bytes(every)
-        return every, sizes, np.cumsum(sizes, axis=1) - sizes
+        return sizes, np.cumsum(sizes, axis=1) - sizes
 
-    def swap_shared(self, regions, rows, start):
-        """swap's work through the ranks' shared memory (Shared): the rows every rank sends every other (one
-        Allgather), this rank's `regions` copied into its part, a barrier; each rank's bytes for this one are then
-        in that rank's part."""
-        every, sizes, offsets = self.every_rows(rows)
+    def swap_shared(self, regions, every, start):
+        """swap's work through the ranks' shared memory (Shared): this rank's `regions` copied into its part, a
+        barrier; each rank's bytes for this one are then in that rank's part."""
+        sizes, offsets = self.offsets(every)
         if not self.shared.fit(int(sizes.sum(axis=1).max())):
             self.shared = None
-            return self.swap(regions, rows, start)
+            return self.swap(regions, every, start)
         self.sim.backend.read_regions(regions, into=self.shared.buffers[self.rank])
         start = self.lap("rows", start)
         self.comm.Barrier()  # (every part written; a part is written again after the next step's Allreduce)
         return every[:, self.rank], [(self.shared.buffers[q], int(offsets[q, self.rank])) for q in range(self.size)], \
             self.lap("alltoall", start)
 
-    def swap_peers(self, regions, rows, start):
-        """swap's work from device to device (sphcore.peers): the rows every rank sends every other (one
-        Allgather), this rank's `regions` copied into its outbox and published, a barrier; then every rank's bytes
-        for this one pulled into its inbox."""
-        every, sizes, offsets = self.every_rows(rows)
+    def swap_peers(self, regions, every, start):
+        """swap's work from device to device (sphcore.peers): this rank's `regions` copied into its outbox and
+        published, a barrier; then every rank's bytes for this one pulled into its inbox."""
+        sizes, offsets = self.offsets(every)
         self.peers.fit(int(sizes.sum(axis=1).max()), int(sizes[:, self.rank].sum()))
         self.sim.backend.read_regions(regions, into=self.peers.outbox.buffer)
         self.peers.publish(int(sizes[self.rank].sum()))
@@ -470,47 +472,55 @@ class Rank:
         if self.peers:
             self.peers.close()
 
-    def pick(self, cuts):
-        """The rows each other rank needs for the next step, under the new `cuts`, picked and packed on the device
-        (pick_rows.comp): of the rows the last sort gave the layers near its slab (decomposition.bands), those now
-        in its slab (its own from now on) and those within the halo's width of it. Returns the regions to read back
-        (name, first row, end row) rank by rank, the migrants' then the halo's (as swap takes them), and the rows
-        of each (ranks x 2)."""
-        backend, slabs = self.sim.backend, self.slabs
+    def write_pick(self):
+        """The table of the pick (pick_rows.comp) of the rows each other rank needs for the step after the next,
+        under `next_cuts`: of the layers near its slab (decomposition.bands) under `cuts`, those the next step's sort
+        gives rows, the rows now in its slab (its own from then on) and those within the halo's width of it; the
+        counts zeroed. Written before the step whose last stage picks (`entries`: each entry's rank and layers)."""
+        slabs, cuts = self.slabs, self.next_cuts
         entries = []
         for q in range(self.size):
             _, (below, above) = decomposition.bands(self.cuts, cuts, self.rank, q, self.reach)
-            first, end = int(self.starts[below[0]]), int(self.starts[above[1]])
-            if q != self.rank and end > first:
-                entries.append((q, first, end))
+            if q != self.rank and above[1] > below[0]:
+                entries.append((q, below[0], above[1]))
         if len(entries) > PICK_ENTRIES:
             raise SimulationError(f"step {self.sim.step_count}: rank {self.rank} would send rows to {len(entries)} "
                                   f"ranks, more than {PICK_ENTRIES}: run on fewer ranks")
-        rows = np.zeros((self.size, 2), np.int64)
-        if not entries:
-            return [], rows
-        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
+        table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
-        table[0, 0], slot = len(entries), 0
+        table[0, :2] = len(entries), self.sim.n
         for e, (q, first, end) in enumerate(entries):
             lo, hi = (slabs.box_min + cuts[k] * slabs.cell_size for k in (q, q + 1))
-            table[1 + 2 * e] = first, end, cuts[q], cuts[q + 1]
-            table[2 + 2 * e] = slot, end - first, 0, 0
+            table[1 + e] = first, end, cuts[q], cuts[q + 1]
             bounds[e, :2] = lo - slabs.width if q > 0 else -np.inf, hi + slabs.width if q < self.size - 1 else np.inf
-            slot += end - first
-        if slot > self.sim.n:  # (rows several ranks need, each packed once for each: room for all)
-            self.sim.resize(slot, self.owned_cells())
         for name, values in (("pick_table", table), ("pick_bounds", bounds),
                              ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
-            backend.write_rows(name, 0, values)  # (on Vulkan mapped memory: backends.MAPPED)
-        backend.run_stages([Stage("pick_rows")])
-        counts = backend.read_rows("pick_count", 0, 2 * len(entries)).reshape(-1, 2).astype(np.int64)
-        regions = []
-        for e, ((q, first, end), (migrants, halo)) in enumerate(zip(entries, counts)):
-            base = int(table[2 + 2 * e, 0])
-            top = base + end - first
-            regions += [(PACKED[name], base, base + migrants) for name in self.sent[0]]
-            regions += [(PACKED[name], top - halo, top) for name in self.sent[1]]
+            self.sim.backend.write_rows(name, 0, values)  # (on Vulkan mapped memory: backends.MAPPED)
+        self.entries, self.held = entries, self.sim.n
+
+    def pick(self):
+        """The rows each other rank needs for the next step (write_pick), picked and packed on the device: by the
+        last step's last stage, else now (after a replay), and again where their slots do not fit the rows (room
+        made: a few rows held, or a slab thinner than the halo: rows several ranks need, each packed once for each).
+        Returns the regions to read back (name, first row, end row) rank by rank, the migrants' then the halo's (as
+        swap takes them), and the rows of each (ranks x 2)."""
+        backend, picked = self.sim.backend, self.picked
+        if picked is None:
+            self.write_pick()
+        rows = np.array([self.starts[end] - self.starts[first] for _, first, end in self.entries], np.int64)
+        zones = -(-rows // PICK_ALIGN) * PICK_ALIGN  # (pick_rows.comp: two an entry, migrants and halo)
+        if picked is None or 2 * zones.sum() > self.sim.n:
+            if 2 * zones.sum() > self.sim.n:  # (the table's rows held as they were)
+                self.sim.resize(int(2 * zones.sum()), self.owned_cells())
+                backend.write_rows("pick_count", 0, np.zeros(2 * PICK_ENTRIES, np.uint32))
+            backend.run_stages([Stage("pick_rows")])
+            picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
+        self.picked = None
+        rows, regions = np.zeros((self.size, 2), np.int64), []
+        counts = picked.reshape(-1, 2).astype(np.int64)
+        for (q, _, _), base, zone, (migrants, halo) in zip(self.entries, 2 * (np.cumsum(zones) - zones), zones, counts):
+            regions += [(PACKED[name], int(base), int(base + migrants)) for name in self.sent[0]]
+            regions += [(PACKED[name], int(base + zone), int(base + zone + halo)) for name in self.sent[1]]
             rows[q] = migrants, halo
         return regions, rows
 
@@ -635,7 +645,7 @@ class Rank:
             if replay:
                 self.keep()
             return
-        if replay and self.good is not None and self.sim.step_count - self.good[3] > 1:
+        if replay and self.good is not None and self.sim.step_count - self.good[-1] > 1:
             self.replay()
         if failed[0] == self.rank:
             raise failure
@@ -644,17 +654,21 @@ class Rank:
     def keep(self):
         """Keep what this rank holds at a step a check passed, for replay: every CARRIED buffer of its rows, its
         cuts and the rows of each layer."""
-        self.good = self.sim.backend.read(CARRIED), self.cuts.copy(), self.starts, self.sim.step_count
+        self.good = self.sim.backend.read(CARRIED), self.cuts.copy(), self.next_cuts.copy(), self.starts, \
+            self.sim.step_count
 
     def replay(self):
         """Every rank back where its last good check left it (keep: its rows loaded again, the cuts, the step), then
         a step at a time, each checked, up to the step whose check failed: the first that fails raises. The steps
         are the same bits as the first time (any cuts give one rank's)."""
-        failed_at, (carried, self.cuts, self.starts, step) = self.sim.step_count, self.good
+        failed_at, (carried, self.cuts, self.next_cuts, self.starts, step) = self.sim.step_count, self.good
         self.sim.load({name: carried[name] for name in LOADED}, self.owned_cells())
         for name in CARRIED:
             if name not in LOADED:
                 self.sim.backend.write_buffer(name, carried[name])
+        self.picked = None  # (the scratch rows are of a later step: picked again, from the rows of each layer)
+        if self.starts is not None:
+            self.sim.backend.write_rows("layer_start", 0, self.starts[:-1].astype(np.uint32))
         self.sim.step_count = self.sim.checked_step = step
         while self.sim.step_count < failed_at:
             self.step()

@@ -74,11 +74,12 @@ BUFFERS = {
     "gauge_table": (np.float32, 4, "gauge_rows"),
     "gauge_state": (np.uint32, 4, "gauge_rows"),
     "gauge_samples": (REAL, 4, "gauge_samples"),
-    "pick_table": (np.uint32, 4, 1 + 2 * PICK_ENTRIES),
+    "pick_table": (np.uint32, 4, 1 + PICK_ENTRIES),
     "pick_bounds": (np.float32, 4, PICK_ENTRIES),
     "pick_count": (np.uint32, 1, 2 * PICK_ENTRIES),
     "layer_start": (np.uint32, 1, "layers"),
     "gauge_layers": (REAL, 4, "gauge_layers"),
+    "scratch_vh": (REAL, 4, "particles"),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -108,11 +109,13 @@ BUFFERS = {
 # a ring the host reads before it can fill ("gauge_rows": 2 per gauge, "gauge_samples": GAUGE_SLOTS per gauge; at
 # least 1 gauge's: a state without gauges has a gauge_state of zeros, which sample_gauges skips).
 # pick_table, pick_bounds, pick_count: a rank's exchange (sphcore.parallel; shaders/sph/pick_rows.comp): the number of
-# entries, then two rows an entry (another rank): the rows it may need (first, end) and its slab's layers (first,
-# end), then its first slot and slots; the slab widened by the halo's width (lowest, highest coordinate); the
-# migrants and the halo rows picked for it.
+# entries and the rows held, then a row an entry (another rank): the layers whose rows it may need (first, end) and
+# its slab's layers (first, end); the slab widened by the halo's width (lowest, highest coordinate); the migrants and
+# the halo rows picked for it.
 # layer_start: the first row of each cell layer (the grid's slowest index) after the sort (cell_offsets), which a
 # rank reads after a step (sphcore.parallel: Rank.starts).
+# scratch_vh: a rank's pick of Verlet's half-step velocities (pick_rows.comp: the step's last stage, after which
+# particle_a holds the step's accelerations, as a checkpoint keeps them).
 # gauge_layers: on a rank, a force or moment gauge's sum over each cell layer, a ring of LAYER_SLOTS samples a gauge
 # (sample_gauges.comp; "gauge_layers": LAYER_SLOTS rows of "layers" a gauge, at least 1 gauge's).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
@@ -173,8 +176,8 @@ STAGES = {
                                                 "time_state", "gauge_table", "gauge_state", "gauge_samples",
                                                 "layer_start", "gauge_layers")),
     "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
-                                           "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "particle_a",
-                                           "pick_table", "pick_bounds", "pick_count")),
+                                           "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
+                                           "pick_table", "pick_bounds", "pick_count", "layer_start")),
 }
 
 def neighbour_stages(cell_total):

@@ -246,9 +246,11 @@ def test_load_on_numba_reuses_its_arrays():
 
 @pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
 def test_pick_rows_packs_what_each_rank_needs(backend):
-    """pick_rows.comp (a rank's exchange): for each entry, of its rows, those whose layer lies in its slab are
-    packed from its first slot up (every buffer a migrant sends), those within its bounds from its last slot down;
-    entries whose rows overlap each get their copy. Against numpy on the rows read back, bit for bit."""
+    """pick_rows.comp (a rank's exchange): for each entry, of the rows the last sort gave its layers (layer_start),
+    those whose layer lies in its slab are packed into its first zone of slots (every buffer a migrant sends), those
+    within its bounds into its second, each zone as many slots as the rows rounded up to 4; entries whose rows
+    overlap each get their copy, the zones of each following the last's. Against numpy on the rows read back, bit for
+    bit."""
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
@@ -261,17 +263,24 @@ def test_pick_rows_packs_what_each_rank_needs(backend):
         n, b = sim.n, sim.backend
         x = b.read_rows("particle_x", 0, n)
         P = sim.params[0]
-        layer = decomposition.layers_of(x[:, 1], P["box_min"][1], P["inv_cell"], int(P["grid_dim"][1]))
-        # (rows, slab's layers, bounds): overlapping rows, an open bound either side, a slab with no particle
-        entries = [((0, n), (3, 5), (0.02, 0.16)), ((40, n - 30), (6, 7), (-np.inf, 0.3)),
-                   ((0, n // 2), (0, 1), (0.11, np.inf)), ((5, 200), (40, 41), (0.3, 0.45))]
-        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
+        layers = int(P["grid_dim"][1])
+        layer = decomposition.layers_of(x[:, 1], P["box_min"][1], P["inv_cell"], layers)
+        starts = np.append(b.read_rows("layer_start", 0, layers), n).astype(np.int64)
+        assert np.array_equal(starts[:-1], np.searchsorted(layer, np.arange(layers)))  # (the sort's layers, in order)
+        # (layers whose rows, slab's layers, bounds): overlapping rows, an open bound either side, a slab with no
+        # particle, rows up to the last layer (the rows held)
+        entries = [((0, layers), (3, 5), (0.02, 0.16)), ((2, layers - 3), (6, 7), (-np.inf, 0.3)),
+                   ((0, layers // 2), (0, 1), (0.11, np.inf)), ((1, 9), (40, 41), (0.3, 0.45))]
+        table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
-        table[0, 0], slot = len(entries), 0
+        table[0, :2] = len(entries), n
+        rows_of, slot = [], 0
         for e, ((first, end), (lo, hi), (low, high)) in enumerate(entries):
-            table[1 + 2 * e], table[2 + 2 * e] = (first, end, lo, hi), (slot, end - first, 0, 0)
+            table[1 + e] = first, end, lo, hi
             bounds[e, :2] = low, high
-            slot += end - first
+            zone = -(-(starts[end] - starts[first]) // 4) * 4  # (pick_rows.comp's zones: PICK_ALIGN rows)
+            rows_of.append((int(starts[first]), int(starts[end]), slot, zone))
+            slot += 2 * zone
         assert slot > n
         sim.resize(slot)  # (room for each entry's copy; rows past n are in no entry's range)
         b.write_buffer("pick_table", table)
@@ -283,15 +292,14 @@ def test_pick_rows_packs_what_each_rank_needs(backend):
         packed = {name: b.read_rows(PACKED[name], 0, slot) for name in PACKED}
         migrant_buffers, halo_buffers = sent_buffers(scene.spec)
         assert "particle_vh" in migrant_buffers  # (Verlet)
-        for e, ((first, end), (lo, hi), (low, high)) in enumerate(entries):
+        for e, ((_, (lo, hi), (low, high)), (first, end, base, zone)) in enumerate(zip(entries, rows_of)):
             rows = np.arange(first, end)
             mine = (layer[rows] >= lo) & (layer[rows] < hi)
             near = ~mine & (x[rows, 1] >= np.float32(low)) & (x[rows, 1] < np.float32(high))
-            base, top = int(table[2 + 2 * e, 0]), int(table[2 + 2 * e, 0]) + end - first
             assert counts[e].tolist() == [mine.sum(), near.sum()], e
             assert 0 < near.sum() and (0 < mine.sum() or e == 3)
             for picked, slots, names in ((rows[mine], np.arange(base, base + mine.sum()), migrant_buffers),
-                                         (rows[near], np.arange(top - near.sum(), top), halo_buffers)):
+                                         (rows[near], np.arange(base + zone, base + zone + near.sum()), halo_buffers)):
                 slots = slots[np.argsort(packed["particle_id"][slots])]  # (in id order: the slots' is the scheduler's)
                 picked = picked[np.argsort(held["particle_id"][picked])]
                 assert np.array_equal(packed["particle_id"][slots], held["particle_id"][picked])

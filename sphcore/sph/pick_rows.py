@@ -1,7 +1,7 @@
-"""Between two steps of a rank of sphcore.parallel: the rows of its slab each other rank needs for the next step,
-packed for the exchange, one invocation per row: a migrant (its layer in the other's slab) from the entry's first
-slot on, a halo row (within the halo's width of the slab) from its last down; into the sort's scratch buffers
-(Verlet's half-step velocity into particle_a). The shader says more.
+"""After a step of a rank of sphcore.parallel (the step's last stage, or alone before the exchange): the rows of its
+slab each other rank needs for the next step, packed for the exchange, one invocation per row: a migrant (its layer in
+the other's slab) into the entry's first zone of slots, a halo row (within the halo's width of the slab) into its
+second; into the sort's scratch buffers and scratch_vh (Verlet's half-step velocity). The shader says more.
 
 Mirror of shaders/sph/pick_rows.comp: same names, same statement order, same step labels. The atomics become plain
 updates in a sequential launch (invocations in index order).
@@ -14,6 +14,14 @@ from numba import njit
 from sphcore.sph.cells import cells
 from sphcore.workgroups import launcher
 
+PICK_ALIGN = 4  # rows: 16 bytes of a 4-byte buffer
+
+
+@njit
+def row_of(layer, layers, held, layer_start):
+    """The first row the last sort gave layer `layer` (the rows held past the last layer)."""
+    return np.int64(layer_start[layer]) if layer < layers else held
+
 
 @lru_cache(maxsize=None)
 def pick_rows(spec, real=np.float32):
@@ -22,7 +30,8 @@ def pick_rows(spec, real=np.float32):
 
     @njit
     def pick_rows_main(i, params, particle_x, particle_v, particle_rho, particle_id, particle_vh, scratch_x,
-                       scratch_v, scratch_id, scratch_rho, particle_a, pick_table, pick_bounds, pick_count):
+                       scratch_v, scratch_id, scratch_rho, scratch_vh, pick_table, pick_bounds, pick_count,
+                       layer_start):
         P = params[0]
         # [1] one invocation per row
         if i >= P.n:
@@ -34,20 +43,29 @@ def pick_rows(spec, real=np.float32):
         x_z = particle_x[i, 2]
         layer = min(max(cell_of(P, x_x, x_y, x_z)[axis], 0), int(P.grid_dim[axis]) - 1)
         coordinate = particle_x[i, axis]
-        # [3] each rank the row may go to (pick_table[0, 0] entries: rows (first, end, slab's first layer, end
-        #     layer), then (first slot, slots)), and the slot it takes there
+        # [3] each rank the row may go to (pick_table[0]: the entries, the rows held; then an entry's row: the layers
+        #     whose rows it may need (first, end), its slab's first layer and end layer), and the slot it takes there
         entries = np.int64(pick_table[0, 0])  # (int64 throughout: numba takes uint32 with int64 as float64)
+        held = np.int64(pick_table[0, 1])
+        layers = np.int64(P.grid_dim[axis])
+        base = 0
         for e in range(entries):
-            if i < np.int64(pick_table[1 + 2 * e, 0]) or i >= np.int64(pick_table[1 + 2 * e, 1]):
+            first = row_of(np.int64(pick_table[1 + e, 0]), layers, held, layer_start)
+            slots = row_of(np.int64(pick_table[1 + e, 1]), layers, held, layer_start) - first
+            zone = (slots + PICK_ALIGN - 1) // PICK_ALIGN * PICK_ALIGN
+            slot = base
+            base += 2 * zone
+            if i < first or i >= first + slots:
                 continue
-            if layer >= np.int64(pick_table[1 + 2 * e, 2]) and layer < np.int64(pick_table[1 + 2 * e, 3]):
-                k = np.int64(pick_table[2 + 2 * e, 0]) + np.int64(pick_count[2 * e])
+            if layer >= np.int64(pick_table[1 + e, 2]) and layer < np.int64(pick_table[1 + e, 3]):
+                k = slot + np.int64(pick_count[2 * e])
                 pick_count[2 * e] += 1
             elif coordinate >= real(pick_bounds[e, 0]) and coordinate < real(pick_bounds[e, 1]):
-                k = (np.int64(pick_table[2 + 2 * e, 0]) + np.int64(pick_table[2 + 2 * e, 1]) - 1
-                     - np.int64(pick_count[2 * e + 1]))
+                k = slot + zone + np.int64(pick_count[2 * e + 1])
                 pick_count[2 * e + 1] += 1
             else:
+                continue
+            if slot + 2 * zone > P.n:
                 continue
             # [4] the row packed into slot k
             for c in range(4):  # (a vec4)
@@ -58,6 +76,6 @@ def pick_rows(spec, real=np.float32):
             scratch_rho[k] = particle_rho[i]
             if VERLET:
                 for c in range(4):  # (a vec4)
-                    particle_a[k, c] = particle_vh[i, c]
+                    scratch_vh[k, c] = particle_vh[i, c]
 
     return launcher(pick_rows_main, parallel=False)

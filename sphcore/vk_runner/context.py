@@ -322,6 +322,17 @@ class Recording:
         vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, stages,
                                 0, 1, [barrier], 0, None, 0, None)
 
+    def copies_barrier(self):
+        """Make every copy so far visible to every later shader and copy (the commands of later command buffers of
+        the submission too: a barrier's scope is the submission order)."""
+        vk = self.ctx.vk
+        transfer, compute = vk.VK_PIPELINE_STAGE_TRANSFER_BIT, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT
+        barrier = vk.VkMemoryBarrier(
+            sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER, srcAccessMask=vk.VK_ACCESS_TRANSFER_WRITE_BIT,
+            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_TRANSFER_READ_BIT
+            | vk.VK_ACCESS_TRANSFER_WRITE_BIT)
+        vk.vkCmdPipelineBarrier(self.command_buffer, transfer, transfer | compute, 0, 1, [barrier], 0, None, 0, None)
+
     def timestamp(self, timer, index):
         """Write the GPU clock into slot `index` of `timer` (a Timer) once every earlier command
         has finished (bottom of the pipe): differences of consecutive slots time what ran between."""
@@ -675,8 +686,9 @@ class Context:
         """Copy (source offset, destination offset, bytes) `regions` from buffer `src` to `dst`, and wait."""
         self._copies([(src, dst, regions)])
 
-    def _copies(self, copies):
-        """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait."""
+    def _copies(self, copies, then=None):
+        """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait; with
+        `then` (a finished Recording), it runs after the copies in the same submission, their writes visible to it."""
         grouped = {}  # (one command a pair of buffers: a command took 7 us of Python)
         for src, dst, regions in copies:
             grouped.setdefault((src, dst), []).extend(regions)
@@ -687,7 +699,9 @@ class Context:
             array = self.vk.ffi.new("VkBufferCopy[]", len(regions))
             np.frombuffer(self.vk.ffi.buffer(array), np.uint64).reshape(-1, 3)[:] = regions
             self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, len(regions), array)
-        self.submit(rec.end())
+        if then is not None:
+            rec.copies_barrier()
+        self.submit(rec.end(), *([then] if then is not None else []))
         rec.free()
 
     # ---- public ----
@@ -710,10 +724,10 @@ class Context:
         space_to_write's)."""
         self.write_parts([(data, copies)])
 
-    def write_parts(self, parts, copies_first=()):
+    def write_parts(self, parts, copies_first=(), then=None):
         """write_regions of each (data, copies) of `parts`, in one submission: each `data` a Buffer, or one host
         array (uint8) for them all; with the buffer copies `copies_first` (_copies') where given, of bytes the
-        writes do not touch."""
+        writes do not touch; and `then` (a finished Recording) after them in that submission (_copies)."""
         commands, staged = list(copies_first), None
         for data, copies in parts:
             copies = [c for c in copies if c[3]]
@@ -731,7 +745,9 @@ class Context:
                 source = staged[1]
             commands += [(source.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies]
         if commands:
-            self._copies(commands)
+            self._copies(commands, then)
+        elif then is not None:
+            self.submit(then)
 
     def buffer(self, nbytes, name="buffer", uniform=False, mapped=False):
         return Buffer(self, nbytes, name, uniform, mapped)
@@ -745,13 +761,13 @@ class Context:
     def timer(self, slots):
         return Timer(self, slots)
 
-    def submit(self, recording):
-        """Run a finished recording and wait for it."""
+    def submit(self, *recordings):
+        """Run finished recordings, in order, in one submission and wait for it."""
         vk = self.vk
         try:
             vk.vkQueueSubmit(self.queue, 1, [vk.VkSubmitInfo(
-                sType=vk.VK_STRUCTURE_TYPE_SUBMIT_INFO, commandBufferCount=1,
-                pCommandBuffers=[recording.command_buffer])], self.fence)
+                sType=vk.VK_STRUCTURE_TYPE_SUBMIT_INFO, commandBufferCount=len(recordings),
+                pCommandBuffers=[recording.command_buffer for recording in recordings])], self.fence)
             if self.device_type != "CPU":  # (polled a while first: a short submission is known done sooner)
                 until = time.perf_counter() + SPIN_SECONDS
                 while vk.lib.vkGetFenceStatus(self.device, self.fence) == vk.VK_NOT_READY and \
