@@ -35,7 +35,7 @@ SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow
 HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
 # Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), in
 # memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
-MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start")
+MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table")
 # read_regions packs each region from a multiple of PACK_GRAIN bytes: an H100 copied 40 runs of 1.1 MB in 194 us where
 # each run's bytes were a multiple of 16, in 520 us where they were one of 4 (benchmarks/copy_regions.py)
 PACK_GRAIN = 16
@@ -230,6 +230,10 @@ class NumbaBackend:
             at += packed(len(part))
         return out if into is None else None
 
+    def receive_from(self, data):
+        """`data` (uint8: the bytes received) as place_rows' received words."""
+        self.state["received"] = data.view(np.uint32)
+
     def host_buffer(self, memory):
         """`memory` (uint8) as read_regions' `into` and write_regions' `data`: itself."""
         return memory
@@ -391,6 +395,7 @@ class VulkanBackend:
         self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
         self.local_size, self.spec, self.spec_values = local_size, spec, spec.values()
         self.pipelines = {}
+        self.received = None  # (receive_from's buffer, bound in place of "received")
         for name in sorted({s.name for s in stages}):
             self._pipeline(name)
         self._recordings = {}
@@ -406,13 +411,27 @@ class VulkanBackend:
         """The compute pipeline of shader `name`, built on first use with the scene's constants."""
         if name not in self.pipelines:
             spirv = compile_glsl(SHADER_DIR / "sph" / f"{name}.comp", defines=self.defines)
-            # the stage's own buffers only, each at its index in BUFFERS (sparse: lavapipe allows 32 a stage)
-            bound = {NAMES.index(b): self.buffers[b] for b in STAGES[name][2]}
+            bound = self._bound(name)
             pipeline = self.ctx.pipeline(spirv, list(bound), DISPATCH_DTYPE.itemsize, self.local_size,
                                          self.spec_values, uniform_binding=PARAMS_BINDING)
             pipeline.bind(bound, uniform=self.params_buffer)
             self.pipelines[name] = pipeline
         return self.pipelines[name]
+
+    def _bound(self, name):
+        """Stage `name`'s own buffers only, each at its index in BUFFERS (sparse: lavapipe allows 32 a stage);
+        receive_from's buffer in place of "received" where it was given."""
+        return {NAMES.index(b): self.received if b == "received" and self.received is not None else self.buffers[b]
+                for b in STAGES[name][2]}
+
+    def receive_from(self, buffer):
+        """Bind `buffer` (a Buffer of this device: sphcore.peers' inbox) as place_rows' received words; the
+        recordings go (a recorded dispatch uses the descriptor set as it was)."""
+        if buffer is not self.received:
+            self.received = buffer
+            if "place_rows" in self.pipelines:
+                self.pipelines["place_rows"].bind(self._bound("place_rows"), uniform=self.params_buffer)
+                self._free_recordings()
 
     def _recording(self, steps, stages, timed=False, predicate=False, secondary=False):
         """`steps` steps of `stages` in one command buffer (`secondary`: a secondary one); `timed`: a
@@ -565,7 +584,7 @@ class VulkanBackend:
             old.free()
         if grown:
             for name, pipeline in self.pipelines.items():
-                pipeline.bind({NAMES.index(b): self.buffers[b] for b in STAGES[name][2]}, uniform=self.params_buffer)
+                pipeline.bind(self._bound(name), uniform=self.params_buffer)
             self._free_recordings()
         self.shapes.update(shapes)
         self.params = params

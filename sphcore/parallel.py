@@ -5,19 +5,20 @@ Each rank owns a slab of the domain (sphcore.decomposition) and builds a Simulat
 alone: its particles and those of the others within the halo's width (share). They stay on its device; the grid
 orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell runs in the same order whatever rows
 a rank holds them in. A step:
-  [1] the cuts: each rank's owned particles per cell layer (from the rows the last sort gave each layer), summed
-      over the ranks (Allreduce, their total checked) and balanced (a rank's own and half its halo's:
-      decomposition.balance), each cut moved a layer at most;
+  [1] the rows each other rank needs (picked at the end of the last step, [4]) and each rank's owned particles per
+      cell layer (from the rows the last sort gave each layer), one Allgather of both: the particles' total checked,
+      and the next cuts balanced on them (a rank's own and half its halo's: decomposition.balance), each cut moved a
+      layer at most (a step later than the counts: the cuts the pick took are this step's slabs);
   [2] to every other rank, of the owned rows of the cell layers near its slab (decomposition.bands), those now in
       its slab (migration: what a step reads of a particle) and those within the halo's width of it (halo: what a
-      step reads of a neighbour, HALO), picked and packed on the device (pick_rows.comp), copied in one
-      submission: on one host's NVIDIA GPUs from GPU to GPU (sphcore.peers: CUDA IPC), else through host memory,
-      on one host the ranks' shared memory (Shared: on Vulkan each device copies into and out of it), else one
-      Alltoallv of bytes (nothing pickled, nothing picked on the host);
-  [3] the received ones written over the old halo's rows;
-  [4] the plan's stages (on Vulkan in two submissions): reduce_dt takes the rank's slab's rows alone, and the
-      largest |v|^2 and |a|^2 over the ranks (Allreduce) go into its first partial, so every rank's choose_dt
-      takes the same dt, the minimum over the ranks.
+      step reads of a neighbour, HALO), as pick_rows.comp packed them on the device, copied in one submission: on
+      one host's NVIDIA GPUs from GPU to GPU (sphcore.peers: CUDA IPC), else through host memory, on one host the
+      ranks' shared memory (Shared: on Vulkan each device copies into and out of it), else one Alltoallv of bytes
+      (nothing pickled, nothing picked on the host);
+  [3] the received ones written over the old halo's rows, in the submission of [4];
+  [4] the plan's stages (on Vulkan in one submission, two with an adaptive dt), then pick_rows for the next
+      exchange: reduce_dt takes the rank's slab's rows alone, and the largest |v|^2 and |a|^2 over the ranks
+      (Allreduce) go into its first partial, so every rank's choose_dt takes the same dt, the minimum over the ranks.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
@@ -256,6 +257,7 @@ class Rank:
         self.cuts = np.asarray(cuts)
         self.next_cuts = self.cuts.copy()  # (the slabs of the step after the next: pick's)
         self.entries = self.picked = None  # (pick's table, and its counts after the step that picked)
+        self.placed = False  # (the received rows written by place_rows, the step's first stage: place)
         self.start_owned = self.held_owned()  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         exchange = os.environ.get("SPHCORE_MPI_EXCHANGE", "")
@@ -303,19 +305,21 @@ class Rank:
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
+        self.placed = False
         writes = self.exchange() if self.starts is not None else None  # [1]-[3]
         self.write_pick()
-        pick = [Stage("pick_rows")]
+        pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
+        place = [Stage("place_rows")] if self.placed else []
         start = self.lap("exchange", start)
         backend = self.sim.backend
         if self.adaptive:  # [4]
-            backend.run_stages(self.before_dt, writes)
+            backend.run_stages(place + self.before_dt, writes)
             start = self.lap("stages", start)
             self.reduce_dt(MPI)
             start = self.lap("dt", start)
             backend.run_stages(self.after_dt + pick)
         else:
-            backend.run_stages(self.before_dt + pick, writes)
+            backend.run_stages(place + self.before_dt + pick, writes)
         self.starts = np.append(backend.read_rows("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
         self.picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
         self.lap("stages", start)
@@ -394,6 +398,10 @@ class Rank:
         P, n = self.sim.params[0], m + owned
         if n != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
             self.sim.resize(n, self.owned_cells())
+        if self.peers and np.count_nonzero(received_rows.sum(axis=1)) <= PICK_ENTRIES:
+            self.place(received_rows, sources, first, end)
+            self.lap("write", start)
+            return [], move
         at, parts = 0, {}  # (every rank's rows in one submission, with the move: its memory's regions)
         for q_rows, (data, offset) in zip(received_rows, sources):
             regions = parts.setdefault(id(data), (data, []))[1]
@@ -407,6 +415,19 @@ class Rank:
                 at += count
         self.lap("write", start)
         return list(parts.values()), move
+
+    def place(self, received_rows, sources, first, end):
+        """The table of place_rows.comp, the step's first stage where the rows came from GPU to GPU: each sender's
+        rows (ranks x 2: `received_rows`) in the inbox (`sources`: the inbox and the offset of each), which the
+        device writes over the old halo's rows below the owned rows (`first` .. `end`), then after them."""
+        table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
+        senders = [(offset, rows) for rows, (_, offset) in zip(received_rows, sources) if rows.sum()]
+        table[0] = len(senders), first, end, received_rows.sum()
+        for s, (offset, (migrants, halo)) in enumerate(senders):
+            table[1 + s] = offset // 4, migrants, halo, 0
+        self.sim.backend.write_rows("place_table", 0, table)
+        self.sim.backend.receive_from(self.peers.inbox.buffer)
+        self.placed = True
 
     def swap(self, regions, every, start):
         """Send each rank its rows: `regions` read back (rank by rank, `every`[s, q]: the rows of migrants and of halo
@@ -473,10 +494,10 @@ class Rank:
             self.peers.close()
 
     def write_pick(self):
-        """The table of the pick (pick_rows.comp) of the rows each other rank needs for the step after the next,
-        under `next_cuts`: of the layers near its slab (decomposition.bands) under `cuts`, those the next step's sort
-        gives rows, the rows now in its slab (its own from then on) and those within the halo's width of it; the
-        counts zeroed. Written before the step whose last stage picks (`entries`: each entry's rank and layers)."""
+        """The table of the pick (pick_rows.comp), written before the step whose last stage it is: for each other
+        rank, the layers of this rank's slab near its next slab (`next_cuts`; decomposition.bands), whose rows the
+        step's sort gives (layer_start); of those, the ones then in its slab (its own from the next step on) and
+        those within the halo's width of it. The counts zeroed; `entries`: each entry's rank and layers."""
         slabs, cuts = self.slabs, self.next_cuts
         entries = []
         for q in range(self.size):
@@ -496,7 +517,7 @@ class Rank:
         for name, values in (("pick_table", table), ("pick_bounds", bounds),
                              ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
             self.sim.backend.write_rows(name, 0, values)  # (on Vulkan mapped memory: backends.MAPPED)
-        self.entries, self.held = entries, self.sim.n
+        self.entries = entries
 
     def pick(self):
         """The rows each other rank needs for the next step (write_pick), picked and packed on the device: by the
@@ -507,9 +528,9 @@ class Rank:
         backend, picked = self.sim.backend, self.picked
         if picked is None:
             self.write_pick()
-        rows = np.array([self.starts[end] - self.starts[first] for _, first, end in self.entries], np.int64)
-        zones = -(-rows // PICK_ALIGN) * PICK_ALIGN  # (pick_rows.comp: two an entry, migrants and halo)
-        if picked is None or 2 * zones.sum() > self.sim.n:
+        spans = np.array([self.starts[end] - self.starts[first] for _, first, end in self.entries], np.int64)
+        zones = -(-spans // PICK_ALIGN) * PICK_ALIGN  # (pick_rows.comp: two an entry, migrants and halo)
+        if self.entries and (picked is None or 2 * zones.sum() > self.sim.n):
             if 2 * zones.sum() > self.sim.n:  # (the table's rows held as they were)
                 self.sim.resize(int(2 * zones.sum()), self.owned_cells())
                 backend.write_rows("pick_count", 0, np.zeros(2 * PICK_ENTRIES, np.uint32))
@@ -517,7 +538,7 @@ class Rank:
             picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
         self.picked = None
         rows, regions = np.zeros((self.size, 2), np.int64), []
-        counts = picked.reshape(-1, 2).astype(np.int64)
+        counts = np.zeros((0, 2), np.int64) if picked is None else picked.reshape(-1, 2).astype(np.int64)
         for (q, _, _), base, zone, (migrants, halo) in zip(self.entries, 2 * (np.cumsum(zones) - zones), zones, counts):
             regions += [(PACKED[name], int(base), int(base + migrants)) for name in self.sent[0]]
             regions += [(PACKED[name], int(base + zone), int(base + zone + halo)) for name in self.sent[1]]

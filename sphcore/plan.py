@@ -24,6 +24,7 @@ from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
 from sphcore.sph.integrate_density import integrate_density
 from sphcore.sph.pick_rows import pick_rows
+from sphcore.sph.place_rows import place_rows
 from sphcore.sph.reduce_cells import reduce_cells
 from sphcore.sph.reduce_dt import reduce_dt
 from sphcore.sph.sample_gauges import sample_gauges
@@ -80,6 +81,8 @@ BUFFERS = {
     "layer_start": (np.uint32, 1, "layers"),
     "gauge_layers": (REAL, 4, "gauge_layers"),
     "scratch_vh": (REAL, 4, "particles"),
+    "received": (np.uint32, 1, 2),
+    "place_table": (np.uint32, 4, 1 + PICK_ENTRIES),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -116,6 +119,9 @@ BUFFERS = {
 # rank reads after a step (sphcore.parallel: Rank.starts).
 # scratch_vh: a rank's pick of Verlet's half-step velocities (pick_rows.comp: the step's last stage, after which
 # particle_a holds the step's accelerations, as a checkpoint keeps them).
+# received, place_table: a rank's rows pulled from GPU to GPU (place_rows.comp): on Vulkan the peers' inbox is bound
+# in received's place (VulkanBackend.receive_from; numba: the bytes' array); the table: the senders, the owned rows'
+# first and end, the rows received, then a row a sender (its first word, its migrants and halo rows).
 # gauge_layers: on a rank, a force or moment gauge's sum over each cell layer, a ring of LAYER_SLOTS samples a gauge
 # (sample_gauges.comp; "gauge_layers": LAYER_SLOTS rows of "layers" a gauge, at least 1 gauge's).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
@@ -178,6 +184,8 @@ STAGES = {
     "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
                                            "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
                                            "pick_table", "pick_bounds", "pick_count", "layer_start")),
+    "place_rows": (place_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
+                                             "received", "place_table")),
 }
 
 def neighbour_stages(cell_total):

@@ -632,7 +632,8 @@ class Context:
         kind = vk.VK_EXTERNAL_MEMORY_HANDLE_TYPE_OPAQUE_FD_BIT
         buffer = vk.vkCreateBuffer(self.device, vk.VkBufferCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO, size=nbytes, sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE,
-            usage=vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+            usage=vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT
+            | vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
             pNext=vk.VkExternalMemoryBufferCreateInfo(sType=vk.VK_STRUCTURE_TYPE_EXTERNAL_MEMORY_BUFFER_CREATE_INFO,
                                                       handleTypes=kind)), None)
         req = vk.vkGetBufferMemoryRequirements(self.device, buffer)
