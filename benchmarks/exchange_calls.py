@@ -2,7 +2,8 @@
 stages' milliseconds go (the backend's submissions, the peers' copies, the pick, the balance). Run under mpiexec as
 parallel_gpu.py is, with its arguments (--warmup: the steps before the timing); after its JSON line, rank 0 prints
 one line a rank, `CALLS rank {call: ms a timed step}` (calls nest: exchange holds pick, swap_peers; swap_peers holds
-read_regions, publish, pull; run_stages holds the written rows' copies, the stages and the pick):
+pack (run_pack_rows), publish, pull; run_stages: the step's submission, with the received rows' writes and the
+pick):
 
     mpiexec -n 4 python benchmarks/exchange_calls.py --count 33554432 --steps 30 --warmup 100 --out /tmp/calls.json
 """
@@ -40,7 +41,9 @@ def timed(owner, name, key=None):
 
 
 def stage_key(args):
-    return "run_pick" if [getattr(s, "name", s) for s in args[1]] == ["pick_rows"] else "run_stages"
+    """A submission of one exchange stage by its name (run_pick_rows, run_pack_rows), the step's as run_stages."""
+    names = [getattr(s, "name", s) for s in args[1]]
+    return f"run_{names[0]}" if names in (["pick_rows"], ["pack_rows"]) else "run_stages"
 
 
 def count_steps(step):

@@ -35,7 +35,7 @@ SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow
 HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
 # Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), in
 # memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
-MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table")
+MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table", "pack_table")
 # read_regions packs each region from a multiple of PACK_GRAIN bytes: an H100 copied 40 runs of 1.1 MB in 194 us where
 # each run's bytes were a multiple of 16, in 520 us where they were one of 4 (benchmarks/copy_regions.py)
 PACK_GRAIN = 16
@@ -230,9 +230,9 @@ class NumbaBackend:
             at += packed(len(part))
         return out if into is None else None
 
-    def receive_from(self, data):
-        """`data` (uint8: the bytes received) as place_rows' received words."""
-        self.state["received"] = data.view(np.uint32)
+    def bind_words(self, name, data):
+        """`data` (uint8: bytes) as buffer `name`'s words ("received", "sent")."""
+        self.state[name] = data.view(np.uint32)
 
     def host_buffer(self, memory):
         """`memory` (uint8) as read_regions' `into` and write_regions' `data`: itself."""
@@ -395,7 +395,7 @@ class VulkanBackend:
         self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
         self.local_size, self.spec, self.spec_values = local_size, spec, spec.values()
         self.pipelines = {}
-        self.received = None  # (receive_from's buffer, bound in place of "received")
+        self.words = {}  # (bind_words' buffers, bound in place of "received" and "sent")
         for name in sorted({s.name for s in stages}):
             self._pipeline(name)
         self._recordings = {}
@@ -420,17 +420,19 @@ class VulkanBackend:
 
     def _bound(self, name):
         """Stage `name`'s own buffers only, each at its index in BUFFERS (sparse: lavapipe allows 32 a stage);
-        receive_from's buffer in place of "received" where it was given."""
-        return {NAMES.index(b): self.received if b == "received" and self.received is not None else self.buffers[b]
-                for b in STAGES[name][2]}
+        bind_words' buffers in place of theirs."""
+        return {NAMES.index(b): self.words.get(b) or self.buffers[b] for b in STAGES[name][2]}
 
-    def receive_from(self, buffer):
-        """Bind `buffer` (a Buffer of this device: sphcore.peers' inbox) as place_rows' received words; the
-        recordings go (a recorded dispatch uses the descriptor set as it was)."""
-        if buffer is not self.received:
-            self.received = buffer
-            if "place_rows" in self.pipelines:
-                self.pipelines["place_rows"].bind(self._bound("place_rows"), uniform=self.params_buffer)
+    def bind_words(self, name, buffer):
+        """Bind `buffer` (a Buffer of this device: sphcore.peers' inbox or outbox; None: the backend's own) in place
+        of buffer `name` ("received", "sent"); the recordings that use it go (a recorded dispatch uses the descriptor
+        set as it was)."""
+        if buffer is not self.words.get(name):
+            self.words[name] = buffer
+            stages = [stage for stage in self.pipelines if name in STAGES[stage][2]]
+            for stage in stages:
+                self.pipelines[stage].bind(self._bound(stage), uniform=self.params_buffer)
+            if stages:
                 self._free_recordings()
 
     def _recording(self, steps, stages, timed=False, predicate=False, secondary=False):

@@ -94,9 +94,13 @@ def bands(cuts, next_cuts, rank, other, reach):
     return full, [(need[0], full[0]), (full[1], need[1])]
 
 
-# What a rank's halo row costs a step, in owned rows: it is sorted and its density summed, but its forces (half an
-# owned row's step: compute_forces 3.4 of 6.6 ms on a rank of 4 H200s) are skipped (compute_forces.comp)
-HALO_COST = 0.5
+# What a rank's halo row costs a step, in owned rows: it is sorted and its density summed, but its forces and its
+# integration are skipped (compute_forces.comp). On a rank of 4 H200s at 33.7 M a held row took about 0.25 us (the
+# sort's stages and compute_density), an owned row 0.39 us more (compute_forces, integrate): 0.39 of an owned row's
+# 0.64 (benchmarks/results/parallel_gpu/fold_h200x4/profiled/). At 0.5 the end ranks, with one halo, stepped the
+# slowest (their stages 6.33 ms against 6.05-6.19 inside); at 0.4 a step took 7.93-8.08 ms against 7.97-8.16
+# (pack_h200x4/: halo.json, new.json; three rounds in turns).
+HALO_COST = 0.4
 
 
 def halos(layer_counts, cuts, reach):

@@ -7,7 +7,7 @@ orders each cell's particles by id (id_order: ID_ORDER), so a sum over a cell ru
 a rank holds them in. A step:
   [1] the rows each other rank needs (picked at the end of the last step, [4]) and each rank's owned particles per
       cell layer (from the rows the last sort gave each layer), one Allgather of both: the particles' total checked,
-      and the next cuts balanced on them (a rank's own and half its halo's: decomposition.balance), each cut moved a
+      and the next cuts balanced on them (a rank's own and 0.4 of its halo's: decomposition.balance), each cut moved a
       layer at most (a step later than the counts: the cuts the pick took are this step's slabs);
   [2] to every other rank, of the owned rows of the cell layers near its slab (decomposition.bands), those now in
       its slab (migration: what a step reads of a particle) and those within the halo's width of it (halo: what a
@@ -426,7 +426,7 @@ class Rank:
         for s, (offset, (migrants, halo)) in enumerate(senders):
             table[1 + s] = offset // 4, migrants, halo, 0
         self.sim.backend.write_rows("place_table", 0, table)
-        self.sim.backend.receive_from(self.peers.inbox.buffer)
+        self.sim.backend.bind_words("received", self.peers.inbox.buffer)
         self.placed = True
 
     def swap(self, regions, every, start):
@@ -470,11 +470,12 @@ class Rank:
             self.lap("alltoall", start)
 
     def swap_peers(self, regions, every, start):
-        """swap's work from device to device (sphcore.peers): this rank's `regions` copied into its outbox and
-        published, a barrier; then every rank's bytes for this one pulled into its inbox."""
+        """swap's work from device to device (sphcore.peers): this rank's rows packed into its outbox (pack: the
+        bytes `regions` names, as read_regions would pack them) and published, a barrier; then every rank's bytes
+        for this one pulled into its inbox."""
         sizes, offsets = self.offsets(every)
         self.peers.fit(int(sizes.sum(axis=1).max()), int(sizes[:, self.rank].sum()))
-        self.sim.backend.read_regions(regions, into=self.peers.outbox.buffer)
+        self.pack(every, offsets)
         self.peers.publish(int(sizes[self.rank].sum()))
         start = self.lap("rows", start)
         self.comm.Barrier()
@@ -537,13 +538,28 @@ class Rank:
             backend.run_stages([Stage("pick_rows")])
             picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
         self.picked = None
-        rows, regions = np.zeros((self.size, 2), np.int64), []
+        rows, regions, self.slots = np.zeros((self.size, 2), np.int64), [], []
         counts = np.zeros((0, 2), np.int64) if picked is None else picked.reshape(-1, 2).astype(np.int64)
         for (q, _, _), base, zone, (migrants, halo) in zip(self.entries, 2 * (np.cumsum(zones) - zones), zones, counts):
             regions += [(PACKED[name], int(base), int(base + migrants)) for name in self.sent[0]]
             regions += [(PACKED[name], int(base + zone), int(base + zone + halo)) for name in self.sent[1]]
             rows[q] = migrants, halo
+            self.slots.append((q, base, base + zone))
         return regions, rows
+
+    def pack(self, every, offsets):
+        """pack_rows.comp, in a submission of its own: the rows picked for each other rank (`every`[rank]: its
+        migrants and halo rows) written from the scratch buffers into the peers' outbox, each rank's from its
+        byte offset there (`offsets`[rank])."""
+        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
+        table[0, :2] = len(self.slots), every[self.rank].sum()
+        for e, (q, migrants_slot, halo_slot) in enumerate(self.slots):
+            table[1 + 2 * e, :3] = offsets[self.rank, q] // 4, *every[self.rank, q]
+            table[2 + 2 * e, :2] = migrants_slot, halo_slot
+        backend = self.sim.backend
+        backend.write_rows("pack_table", 0, table)
+        backend.bind_words("sent", self.peers.outbox.buffer)
+        backend.run_stages([Stage("pack_rows")])
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""

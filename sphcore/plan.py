@@ -23,6 +23,7 @@ from sphcore.sph.dfsph_velocity import dfsph_velocity
 from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
 from sphcore.sph.integrate_density import integrate_density
+from sphcore.sph.pack_rows import pack_rows
 from sphcore.sph.pick_rows import pick_rows
 from sphcore.sph.place_rows import place_rows
 from sphcore.sph.reduce_cells import reduce_cells
@@ -83,6 +84,8 @@ BUFFERS = {
     "scratch_vh": (REAL, 4, "particles"),
     "received": (np.uint32, 1, 2),
     "place_table": (np.uint32, 4, 1 + PICK_ENTRIES),
+    "sent": (np.uint32, 1, 2),
+    "pack_table": (np.uint32, 4, 1 + 2 * PICK_ENTRIES),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -120,8 +123,11 @@ BUFFERS = {
 # scratch_vh: a rank's pick of Verlet's half-step velocities (pick_rows.comp: the step's last stage, after which
 # particle_a holds the step's accelerations, as a checkpoint keeps them).
 # received, place_table: a rank's rows pulled from GPU to GPU (place_rows.comp): on Vulkan the peers' inbox is bound
-# in received's place (VulkanBackend.receive_from; numba: the bytes' array); the table: the senders, the owned rows'
-# first and end, the rows received, then a row a sender (its first word, its migrants and halo rows).
+# in received's place (backend.bind_words; numba: the bytes' array); the table: the senders, the owned rows' first
+# and end, the rows received, then a row a sender (its first word, its migrants and halo rows).
+# sent, pack_table: the rows a rank sends from GPU to GPU (pack_rows.comp), the peers' outbox bound in sent's place;
+# the table: the entries, the rows sent, then two rows an entry (its first word, migrants and halo rows; the first
+# slot of each in the scratch buffers).
 # gauge_layers: on a rank, a force or moment gauge's sum over each cell layer, a ring of LAYER_SLOTS samples a gauge
 # (sample_gauges.comp; "gauge_layers": LAYER_SLOTS rows of "layers" a gauge, at least 1 gauge's).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
@@ -184,6 +190,8 @@ STAGES = {
     "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
                                            "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
                                            "pick_table", "pick_bounds", "pick_count", "layer_start")),
+    "pack_rows": (pack_rows, "particles", ("scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
+                                           "sent", "pack_table")),
     "place_rows": (place_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
                                              "received", "place_table")),
 }
