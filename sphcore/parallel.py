@@ -297,8 +297,8 @@ class Rank:
     def step(self):
         """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
         `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the new halo's copies listed),
-        stages ([4], the new halo written first in the same submission, and where it can, the pick of the rows the
-        next step's exchange sends: its last stage), dt (the partials read back and their Allreduce)."""
+        stages ([4], the new halo written first in the same submission, the pick of the rows the next step's
+        exchange sends its last stage: none on one rank), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
             if self.sim.gauges.since >= self.sim.gauges.slots(self.layers).min():
@@ -465,7 +465,7 @@ class Rank:
             return self.swap(regions, every, start)
         self.sim.backend.read_regions(regions, into=self.shared.buffers[self.rank])
         start = self.lap("rows", start)
-        self.comm.Barrier()  # (every part written; a part is written again after the next step's Allreduce)
+        self.comm.Barrier()  # (every part written; a part is written again after the next step's Allgather)
         return every[:, self.rank], [(self.shared.buffers[q], int(offsets[q, self.rank])) for q in range(self.size)], \
             self.lap("alltoall", start)
 
