@@ -2,17 +2,16 @@
 // After a step of a rank of sphcore.parallel whose rows go from GPU to GPU (sphcore.peers: its outbox): the rows
 // pick_rows.comp packed into the scratch buffers, written into `sent` as each other rank takes them (place_rows.comp),
 // one invocation per row sent (a copy command a buffer's run ran on the copy engine, about a tenth of the memory's
-// bandwidth). For each entry (another rank), in order: its migrants' runs (position, velocity, density, id, and
-// Verlet's half-step velocity), then its halo's (position, velocity, density, id), each run of a buffer's rows from
-// a multiple of 16 bytes (backends.PACK_GRAIN). pack_table[0]: the entries, the rows sent; pack_table[1 + 2e]: entry
-// e's first word in `sent`, its migrants and halo rows; pack_table[2 + 2e]: the first slot of its migrants and of its
-// halo in the scratch buffers (pick_rows.comp's zones).
+// bandwidth), each entry's (another rank's) as packed_rows.glsl lays them out. pack_table[0]: the entries, the rows
+// sent; pack_table[1 + 2e]: entry e's first word in `sent`, its migrants and halo rows; pack_table[2 + 2e]: the first
+// slot of its migrants and of its halo in the scratch buffers (pick_rows.comp's zones).
 // Mirror: sphcore/sph/pack_rows.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "real.glsl"
+#include "packed_rows.glsl"
 
 layout(std430, binding = 11) readonly buffer ScratchX { real4 scratch_x[]; };
 layout(std430, binding = 12) readonly buffer ScratchV { real4 scratch_v[]; };
@@ -23,23 +22,18 @@ layout(std430, binding = 43) writeonly buffer Sent { uint sent[]; };
 layout(std430, binding = 44) readonly buffer PackTable { uvec4 pack_table[]; };
 
 #ifdef SPHCORE_FLOAT64
-const uint REAL_WORDS = 2u;
 void put_real(uint w, real value) {
     uvec2 words = unpackDouble2x32(value);
     sent[w] = words.x;
     sent[w + 1u] = words.y;
 }
 #else
-const uint REAL_WORDS = 1u;
 void put_real(uint w, real value) { sent[w] = floatBitsToUint(value); }
 #endif
 
 void put_real4(uint w, real4 value) {
     for (uint c = 0u; c < 4u; c++) put_real(w + c * REAL_WORDS, value[c]);
 }
-
-// The words of a run of `rows` rows of `words` words each, from a multiple of 16 bytes (4 words).
-uint run_words(uint rows, uint words) { return (rows * words + 3u) / 4u * 4u; }
 
 void main() {
     // [1] one invocation per row sent
@@ -61,8 +55,7 @@ void main() {
     bool migrant = j < entry.y;
     uint k = slots.x + j;
     if (!migrant) {
-        w += 2u * run_words(entry.y, 4u * REAL_WORDS) + run_words(entry.y, REAL_WORDS) + run_words(entry.y, 1u);
-        if (VERLET) w += run_words(entry.y, 4u * REAL_WORDS);
+        w += migrant_words(entry.y);
         j -= entry.y;
         count = entry.z;
         k = slots.y + j;

@@ -2,16 +2,15 @@
 // After a step of a rank of sphcore.parallel (the step's last stage, or alone before the exchange): the rows of its
 // slab each other rank needs for the next step, packed for the exchange (sphcore.parallel.Rank.exchange). One
 // invocation per row. Entry e of pick_table is one other rank: the layers whose rows it may need (those the last sort
-// gave the layers near its slab: decomposition.bands; their rows from layer_start) and the layers of its slab under
-// the next cuts; its slots follow those of the entries before it: two zones of as many as the rows it may need,
-// each rounded up to PICK_ALIGN rows (the copies that read them back start on 16 bytes). A row whose layer (as
-// count_cells finds it) is in that slab is the rank's from then on (a migrant: what a step reads of a particle
-// before writing it); a row within the halo's width of the slab (pick_bounds: the slab widened by
-// decomposition.halo_width) is its halo. Migrants take slots from the first zone's first on, the halo from the
-// second's (atomic counts in pick_count: the order of a slot depends on scheduling; the receiver's sort puts every
-// cell in id order whatever its rows). The rows go into the sort's scratch buffers and scratch_vh (Verlet's half-step velocity),
-// which a step writes before it reads them; an entry whose zones end past the rows (P.n) is counted, not written
-// (the host makes room and picks again).
+// gave the layers near its slab: decomposition.bands; their rows from layer_start) and the layers of its slab under the
+// next cuts; its slots follow those of the entries before it: two zones of as many as the rows it may need, each
+// rounded up to PICK_ALIGN rows (the copies that read them back start on 16 bytes). A row whose layer (as count_cells
+// finds it) is in that slab is the rank's from then on (a migrant: what a step reads of a particle before writing it);
+// a row within the halo's width of the slab (pick_bounds: the slab widened by decomposition.halo_width) is its halo.
+// Migrants take slots from the first zone's first on, the halo from the second's (atomic counts in pick_count: the
+// order of a slot depends on scheduling; the receiver's sort puts every cell in id order whatever its rows). The rows
+// go into the sort's scratch buffers and scratch_vh (Verlet's half-step velocity), which a step writes before it reads
+// them; an entry whose zones end past the rows (P.n) is counted, not written (the host makes room and picks again).
 // Mirror: sphcore/sph/pick_rows.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;

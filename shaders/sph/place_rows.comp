@@ -2,17 +2,17 @@
 // Before a step of a rank of sphcore.parallel whose rows came from GPU to GPU (sphcore.peers: its inbox): the rows
 // received from the other ranks written over the old halo's rows, one invocation per received row (the step's first
 // stage; a copy command a buffer's run ran on the copy engine, about a tenth of the memory's bandwidth). `received`
-// holds each sender's rows as Rank.swap_peers pulled them: its migrants' runs (position, velocity, density, id, and
-// Verlet's half-step velocity), then its halo's (position, velocity, density, id), each run of a buffer's rows from
-// a multiple of 16 bytes (backends.PACK_GRAIN). place_table[0]: the senders, the first and the end of the rows the
-// rank owns, the rows received; place_table[1 + s]: sender s's first word in `received`, its migrants and halo
-// rows. A received row goes below the owned rows while there is room there, after them from then on.
+// holds each sender's rows as Rank.swap_peers pulled them (packed_rows.glsl). place_table[0]: the senders, the first
+// and the end of the rows the rank owns, the rows received; place_table[1 + s]: sender s's first word in `received`,
+// its migrants and halo rows. A received row goes below the owned rows while there is room there, after them from then
+// on.
 // Mirror: sphcore/sph/place_rows.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "real.glsl"
+#include "packed_rows.glsl"
 
 layout(std430, binding = 0) writeonly buffer ParticleX { real4 particle_x[]; };
 layout(std430, binding = 1) writeonly buffer ParticleV { real4 particle_v[]; };
@@ -23,19 +23,14 @@ layout(std430, binding = 41) readonly buffer Received { uint received[]; };
 layout(std430, binding = 42) readonly buffer PlaceTable { uvec4 place_table[]; };
 
 #ifdef SPHCORE_FLOAT64
-const uint REAL_WORDS = 2u;
 real real_at(uint w) { return packDouble2x32(uvec2(received[w], received[w + 1u])); }
 #else
-const uint REAL_WORDS = 1u;
 real real_at(uint w) { return uintBitsToFloat(received[w]); }
 #endif
 
 real4 real4_at(uint w) {
     return real4(real_at(w), real_at(w + REAL_WORDS), real_at(w + 2u * REAL_WORDS), real_at(w + 3u * REAL_WORDS));
 }
-
-// The words of a run of `rows` rows of `words` words each, from a multiple of 16 bytes (4 words).
-uint run_words(uint rows, uint words) { return (rows * words + 3u) / 4u * 4u; }
 
 void main() {
     // [1] one invocation per received row
@@ -56,8 +51,7 @@ void main() {
     uint count = sender.y;
     bool migrant = j < sender.y;
     if (!migrant) {
-        w += 2u * run_words(sender.y, 4u * REAL_WORDS) + run_words(sender.y, REAL_WORDS) + run_words(sender.y, 1u);
-        if (VERLET) w += run_words(sender.y, 4u * REAL_WORDS);
+        w += migrant_words(sender.y);
         j -= sender.y;
         count = sender.z;
     }

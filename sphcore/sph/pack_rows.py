@@ -9,7 +9,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from sphcore.sph.place_rows import run_words
+from sphcore.sph.packed_rows import packed_rows, run_words
 from sphcore.workgroups import launcher
 
 
@@ -17,6 +17,7 @@ from sphcore.workgroups import launcher
 def pack_rows(spec, real=np.float32):
     VERLET = spec.VERLET
     REAL_WORDS = np.dtype(real).itemsize // 4
+    migrant_words = packed_rows(spec, real)
 
     @njit
     def pack_rows_main(a, params, scratch_x, scratch_v, scratch_id, scratch_rho, scratch_vh, sent, pack_table):
@@ -38,10 +39,7 @@ def pack_rows(spec, real=np.float32):
         migrant = j < migrants
         k = np.int64(pack_table[2 + 2 * e, 0]) + j
         if not migrant:
-            w += (2 * run_words(migrants, 4 * REAL_WORDS) + run_words(migrants, REAL_WORDS)
-                  + run_words(migrants, 1))
-            if VERLET:
-                w += run_words(migrants, 4 * REAL_WORDS)
+            w += migrant_words(migrants)
             j -= migrants
             count = halo
             k = np.int64(pack_table[2 + 2 * e, 1]) + j

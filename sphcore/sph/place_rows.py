@@ -9,19 +9,15 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.packed_rows import packed_rows, run_words
 from sphcore.workgroups import launcher
-
-
-@njit
-def run_words(rows, words):
-    """The words of a run of `rows` rows of `words` words each, from a multiple of 16 bytes (4 words)."""
-    return (rows * words + 3) // 4 * 4
 
 
 @lru_cache(maxsize=None)
 def place_rows(spec, real=np.float32):
     VERLET = spec.VERLET
     REAL_WORDS = np.dtype(real).itemsize // 4
+    migrant_words = packed_rows(spec, real)
 
     @njit
     def place_rows_main(a, params, particle_x, particle_v, particle_rho, particle_id, particle_vh, received,
@@ -43,10 +39,7 @@ def place_rows(spec, real=np.float32):
         count = migrants
         migrant = j < migrants
         if not migrant:
-            w += (2 * run_words(migrants, 4 * REAL_WORDS) + run_words(migrants, REAL_WORDS)
-                  + run_words(migrants, 1))
-            if VERLET:
-                w += run_words(migrants, 4 * REAL_WORDS)
+            w += migrant_words(migrants)
             j -= migrants
             count = halo
         # [4] the row it replaces: below the owned rows, else after them
