@@ -287,8 +287,13 @@ class Rank:
         return take(held, owner == self.rank)
 
     def owned_cells(self):
-        """The cells of this rank's slab (params.glsl: owned_first, owned_end)."""
-        return self.cuts[self.rank] * self.per_layer, self.cuts[self.rank + 1] * self.per_layer
+        """The cells of this rank's slab, and those its particles can be in (params.glsl: owned_first, owned_end,
+        cells_first, cells_end): the slab's layers, the reach past each cut (the halo), a layer more (a particle
+        owned at the last step: it moved a layer at most) and another (the cuts move a layer a step at most, so the
+        cells counted at the last step are in the range now: the grid's cell stages leave every other cell empty)."""
+        lo, hi = self.cuts[self.rank], self.cuts[self.rank + 1]
+        first, end = max(lo - self.reach - 2, 0), min(hi + self.reach + 2, self.layers)
+        return tuple(layer * self.per_layer for layer in (lo, hi, first, end))
 
     def owned_rows(self):
         """The rows of the particles this rank owns, after a step: those the sort put in its slab's layers."""
@@ -396,7 +401,8 @@ class Rank:
         # a resize only where the count or the slab changed, or to have reused lists built (the rows moved and
         # written are listed by row: the buffers keep the rows past a smaller count)
         P, n = self.sim.params[0], m + owned
-        if n != self.sim.n or (P["owned_first"], P["owned_end"]) != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
+        cells = (P["owned_first"], P["owned_end"], P["cells_first"], P["cells_end"])
+        if n != self.sim.n or cells != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
             self.sim.resize(n, self.owned_cells())
         if self.peers and np.count_nonzero(received_rows.sum(axis=1)) <= PICK_ENTRIES:
             self.place(received_rows, sources, first, end)

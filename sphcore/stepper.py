@@ -319,8 +319,9 @@ class Simulation:
         fluid_count and up are the bodies' wall particles). The other carried buffers (the time, the grid's
         status, the iteration control), the obstacles and the gauges (their table and state) are kept, every other buffer is zeroed (as at the
         start), and the next step builds its neighbour lists. A rank of sphcore.parallel loads its owned and halo
-        particles at the start; `owned_cells`: the cells of its slab (params.glsl: owned_first, owned_end; (0, 0):
-        every particle is owned). The backend stays (no compile, no new Vulkan device): its buffers keep their
+        particles at the start; `owned_cells`: the cells of its slab, and those its particles can be in
+        (params.glsl: owned_first, owned_end, cells_first, cells_end; (0, 0): every particle is owned, every cell
+        taken). The backend stays (no compile, no new Vulkan device): its buffers keep their
         size while the set fits, n in the parameter block (Vulkan: its uniform) becomes the count, and the
         dispatch sizes follow it (backends: load). read() and checkpoint() check and save the whole scene: call
         them with every particle loaded. With gauges, only a rank's (owned_cells given: its gauges sample its slab)."""
@@ -346,7 +347,9 @@ class Simulation:
             self._params_bytes = self.scene.params(0, self.fluid_count).tobytes()
         params = np.frombuffer(bytearray(self._params_bytes), PARAMS_DTYPE)
         params[0]["n"] = n
-        params[0]["owned_first"], params[0]["owned_end"] = owned_cells
+        fields = ("owned_first", "owned_end", "cells_first", "cells_end")  # (the last two: a rank's grid range)
+        for field, value in zip(fields, owned_cells):
+            params[0][field] = value
         return params
 
     def _count(self, n, owned_cells):

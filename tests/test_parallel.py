@@ -428,6 +428,54 @@ def test_pack_rows_writes_what_read_regions_reads(backend, precision):
             buffer.free()
 
 
+@pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
+def test_cell_stages_over_a_range_of_layers_give_every_cells_bits(backend):
+    """The grid's cell stages over a range of cell layers (params.glsl: cells_first, cells_end; a rank's held layers
+    and a margin): where every particle lies in the range, and the cells counted at the step before too, a step
+    gives the bits of a step over every cell, whatever the pyramid held in the range before (garbage written there
+    first: each of its levels' nodes over the range is made anew); each layer's first row outside the range is 0
+    below it, n above it, and the cells outside it stay empty. Two steps, the range grown by a layer each side at
+    the second."""
+    if backend == "vulkan":
+        from conftest import vulkan_or_skip
+        vulkan_or_skip()
+    from sphcore.pyramid import level_offset, level_size
+    from sphcore.stepper import LOADED
+    config = small_dam_break()  # (a block falling from the middle of a taller box: layers free below and above it)
+    config["domain"]["box_max"] = [1.0, 1.2]
+    config["fluid"]["blocks"] = [{"min": [0.3, 0.5], "max": [0.55, 0.75]}]
+    scene = sphcore.Scene.from_dict(config)
+    with sphcore.Simulation(scene, backend, id_order=True) as whole, \
+            sphcore.Simulation(scene, backend, id_order=True) as ranged:
+        whole.step(20)
+        ranged.step(20)
+        P = whole.params[0]
+        layers = int(P["grid_dim"][1])
+        per_layer = int(P["cell_total"]) // layers
+        x = whole.backend.read_rows("particle_x", 0, whole.n)
+        layer = decomposition.layers_of(x[:, 1], P["box_min"][1], P["inv_cell"], layers)
+        lo, hi = int(layer.min()), int(layer.max()) + 1
+        assert lo >= 2 and hi <= layers - 2  # (a range that leaves layers out below and above)
+        for first, end in ((lo, hi), (lo - 1, hi + 1)):
+            whole.resize(whole.n)
+            ranged.resize(ranged.n, (0, 0, first * per_layer, end * per_layer))
+            pyramid, cells = ranged.backend.read_buffer("cell_pyramid"), int(P["cell_total"])
+            for level in range(int(P["levels"]) + 1):  # (each level's nodes over the range: garbage)
+                nodes = np.arange(level_size(cells, level))
+                over = (nodes >= (first * per_layer) >> (3 * level)) & (nodes <= (end * per_layer - 1) >> (3 * level))
+                pyramid[level_offset(cells, level) + nodes[over]] = 7777
+            ranged.backend.write_buffer("cell_pyramid", pyramid)
+            whole.step(1)
+            ranged.step(1)
+            for name in (*LOADED, "grid_status"):  # (the status: the pyramid's top checked against the count)
+                assert whole.backend.read_buffer(name).tobytes() == ranged.backend.read_buffer(name).tobytes(), name
+            starts = ranged.backend.read_rows("layer_start", 0, layers)
+            assert np.array_equal(starts[first:end], whole.backend.read_rows("layer_start", 0, layers)[first:end])
+            assert (starts[:first] == 0).all() and (starts[end:] == ranged.n).all()
+            counts = ranged.backend.read_buffer("cell_pyramid")[:int(P["cell_total"])]
+            assert not counts[:first * per_layer].any() and not counts[end * per_layer:].any()
+
+
 @pytest.mark.vulkan
 def test_rows_kept_moved_and_written_on_vulkan_as_on_numba():
     """The rows a rank rewrites (backends: resize, read_rows, write_rows, move_rows, read_regions, write_regions)

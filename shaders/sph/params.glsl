@@ -45,6 +45,9 @@ layout(std140, binding = 63) uniform Params {
     // -- one run on several ranks (issue 34: sphcore.parallel)
     uint owned_first;     // the cells of the rank's slab, owned_first .. owned_end - 1: reduce_dt takes the rows the
     uint owned_end;       // sort gave them (owned_end 0: every particle, as on one rank)
+    uint cells_first;     // the cells the grid's cell stages take, cells_first .. cells_end - 1 (cells_end 0: every
+    uint cells_end;       // cell): on a rank the layers its particles can be in, and a margin; every other cell is
+                          // empty (clear_cells, reduce_cells, cell_offsets, sort_cells)
 } P;
 
 // Per dispatch (push constants: 128 bytes on lavapipe, so only what changes between dispatches).

@@ -19,9 +19,9 @@ layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; }; 
 uint sort_key(uint i) { return ID_ORDER ? particle_id[i] : i; }
 
 void main() {
-    // [1] one invocation per cell
+    // [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1: the others are empty)
     uint c = gl_GlobalInvocationID.x;
-    if (c >= P.cell_total) return;
+    if (c >= P.cell_total || (P.cells_end > 0u && (c < P.cells_first || c >= P.cells_end))) return;
     // [2] the cell's run in the sorted order
     uint start = cell_start[c];
     uint count = cell_pyramid[c];

@@ -21,8 +21,14 @@ def cell_offsets(spec, real=np.float32):
     @njit
     def cell_offsets_main(c, params, cell_pyramid, cell_start, grid_status, layer_start):
         P = params[0]
-        # [1] one invocation per cell
+        # [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1); outside it no cell holds
+        #     a particle: a layer's first row is 0 before the range, n after it
         if c >= P.cell_total:
+            return
+        per_layer = int(P.cell_total) // int(P.grid_dim[2] if DIM == 3 else P.grid_dim[1])
+        if P.cells_end > 0 and (c < P.cells_first or c >= P.cells_end):
+            if c % per_layer == 0:
+                layer_start[c // per_layer] = 0 if c < P.cells_first else P.n
             return
         # [2] from the top level down: at level l the cell's ancestor is c / 8^l, and every
         #     sibling before that ancestor (same parent) counts particles that come before c
@@ -34,12 +40,11 @@ def cell_offsets(spec, real=np.float32):
                 start += cell_pyramid[offset + s]
         cell_start[c] = start
         # [3] a layer's first cell: the layer's start
-        per_layer = int(P.cell_total) // int(P.grid_dim[2] if DIM == 3 else P.grid_dim[1])
         if c % per_layer == 0:
             layer_start[c // per_layer] = start
         # [4] the top of the pyramid must hold every particle exactly once; a mismatch is counted
         #     in grid_status[2] (an overflow or a lost particle: never silently accepted)
-        if c == 0 and cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n:
+        if c == P.cells_first and cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n:
             grid_status[2] += 1
 
     return launcher(cell_offsets_main)

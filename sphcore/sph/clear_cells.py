@@ -15,8 +15,8 @@ def clear_cells(spec, real=np.float32):
     @njit
     def clear_cells_main(c, params, cell_pyramid):
         P = params[0]
-        # [1] one invocation per cell
-        if c >= P.cell_total:
+        # [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1; the others stay empty)
+        if c >= P.cell_total or (P.cells_end > 0 and (c < P.cells_first or c >= P.cells_end)):
             return
         # [2] no particle counted yet
         cell_pyramid[c] = 0

@@ -18,9 +18,13 @@ def reduce_cells(spec, real=np.float32):
     def reduce_cells_main(node, params, cell_pyramid):
         P = params[0]
         D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
-        # [1] one invocation per node of level D.level
+        # [1] one invocation per node of level D.level over the grid's range (P.cells_first .. cells_end - 1: the
+        #     others are empty, and so every node above them only)
         size = level_size(P.cell_total, D.level)
         if node >= size:
+            return
+        if P.cells_end > 0 and (node < (P.cells_first >> (3 * D.level))
+                                or node > ((P.cells_end - 1) >> (3 * D.level))):
             return
         # [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
         below = level_offset(P.cell_total, D.level - 1)

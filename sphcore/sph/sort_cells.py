@@ -24,8 +24,8 @@ def sort_cells(spec, real=np.float32):
     @njit
     def sort_cells_main(c, params, cell_pyramid, cell_start, sorted_index, particle_id):
         P = params[0]
-        # [1] one invocation per cell
-        if c >= P.cell_total:
+        # [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1: the others are empty)
+        if c >= P.cell_total or (P.cells_end > 0 and (c < P.cells_first or c >= P.cells_end)):
             return
         # [2] the cell's run in the sorted order
         start = cell_start[c]
