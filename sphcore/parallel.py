@@ -257,7 +257,6 @@ class Rank:
         self.cuts = np.asarray(cuts)
         self.next_cuts = self.cuts.copy()  # (the slabs of the step after the next: pick's)
         self.entries = self.picked = None  # (pick's table, and its counts after the step that picked)
-        self.placed = False  # (the received rows written by place_rows, the step's first stage: place)
         self.start_owned = self.held_owned()  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         exchange = os.environ.get("SPHCORE_MPI_EXCHANGE", "")
@@ -310,11 +309,9 @@ class Rank:
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
-        self.placed = False
-        writes = self.exchange() if self.starts is not None else None  # [1]-[3]
+        writes, place = self.exchange() if self.starts is not None else (None, [])  # [1]-[3]
         self.write_pick()
         pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
-        place = [Stage("place_rows")] if self.placed else []
         start = self.lap("exchange", start)
         backend = self.sim.backend
         if self.adaptive:  # [4]
@@ -368,8 +365,9 @@ class Rank:
         owned particles' total is checked: none lost, none twice); the rows copied from the device into the ranks'
         shared memory (swap_shared), from GPU to GPU (swap_peers) or sent in one Alltoallv (swap). The cuts the pick
         took become the slabs, and the next ones are balanced on the counts, each cut moved a layer at most. Returns
-        the copies (write_parts' parts and move) that write the received rows over the old halo, which the step's
-        stages run after in one submission (the rows resized first). The owned rows stay where they are:
+        the copies (write_parts' parts and move) and the stages (place_rows where the rows came from GPU to GPU:
+        place) that write the received rows over the old halo, which the step's stages run after in one submission
+        (the rows resized first). The owned rows stay where they are:
         one that another rank owns now stays a step, farther than the halo's width from every particle this rank
         owns (its halo rows are replaced at the next step); the sort puts every cell in id order whatever the rows
         (ID_ORDER). A halo row keeps the other buffers' values of whatever the row held."""
@@ -407,7 +405,7 @@ class Rank:
         if self.peers and np.count_nonzero(received_rows.sum(axis=1)) <= PICK_ENTRIES:
             self.place(received_rows, sources, first, end)
             self.lap("write", start)
-            return [], move
+            return ([], move), [Stage("place_rows")]
         at, parts = 0, {}  # (every rank's rows in one submission, with the move: its memory's regions)
         for q_rows, (data, offset) in zip(received_rows, sources):
             regions = parts.setdefault(id(data), (data, []))[1]
@@ -420,7 +418,7 @@ class Rank:
                     offset += packed(count * size)
                 at += count
         self.lap("write", start)
-        return list(parts.values()), move
+        return (list(parts.values()), move), []
 
     def place(self, received_rows, sources, first, end):
         """The table of place_rows.comp, the step's first stage where the rows came from GPU to GPU: each sender's
@@ -433,7 +431,6 @@ class Rank:
             table[1 + s] = offset // 4, migrants, halo, 0
         self.sim.backend.write_rows("place_table", 0, table)
         self.sim.backend.bind_words("received", self.peers.inbox.buffer)
-        self.placed = True
 
     def swap(self, regions, every, start):
         """Send each rank its rows: `regions` read back (rank by rank, `every`[s, q]: the rows of migrants and of halo

@@ -961,6 +961,64 @@ def test_an_exported_buffer_holds_what_the_device_copies_there():
             box.free()
 
 
+# sphcore.peers' calls with host memory where CUDA's is (the outbox and inbox numpy arrays, the mailboxes the ranks'
+# shared window), so that the path from GPU to GPU (pack_rows packing the outbox, place_rows writing the inbox's
+# rows) runs where there is no CUDA.
+HOST_PEERS = """
+import sys, numpy as np, sphcore
+from sphcore import parallel
+from sphcore.peers import Box, room
+
+
+class HostPeers:
+    def __init__(self, comm, backend):
+        self.rank, self.mailboxes, self.outbox, self.inbox = comm.Get_rank(), parallel.Shared(comm, backend), None, None
+
+    def fit(self, send, receive):
+        self.mailboxes.fit(send)  # (collective: every rank asks for the same)
+        for name, nbytes in (("outbox", send), ("inbox", receive)):
+            if getattr(self, name) is None or nbytes > getattr(self, name).nbytes:
+                setattr(self, name, Box(np.zeros(room(nbytes), np.uint8), None, None, room(nbytes)))
+
+    def publish(self, nbytes):
+        self.mailboxes.buffers[self.rank][:nbytes] = self.outbox.buffer[:nbytes]
+
+    def pull(self, sources):
+        offsets, at = [], 0
+        for q, offset, nbytes in sources:
+            self.inbox.buffer[at:at + nbytes] = self.mailboxes.buffers[q][offset:offset + nbytes]
+            offsets.append(at)
+            at += nbytes
+        return offsets
+
+    def close(self):
+        self.mailboxes.close()
+
+
+parallel.Peers.make = classmethod(lambda cls, comm, backend, required=False: HostPeers(comm, backend))
+parallel.main(dict(scene=sphcore.Scene.load(sys.argv[1]), out_dir=sys.argv[2], progress=False))  # (an error aborts all)
+"""
+
+
+@pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
+def test_the_path_from_gpu_to_gpu_on_host_memory_is_bitwise_one_rank(tmp_path):
+    """The exchange from GPU to GPU (pack_rows into the outbox, the peers' publish and pull, place_rows from the
+    inbox: what CI has no GPU for), its CUDA calls done on host memory: a dam break on 3 ranks (one inside, its rows
+    from two senders) ends bitwise where the 1-rank driver does, on numba."""
+    scene_file = tmp_path / "dam.toml"
+    scene_file.write_text(toml(small_dam_break(steps=150)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
+    subprocess.run([sys.executable, "-c", ONE_RANK, str(scene_file), str(tmp_path / "one")], env=env, check=True,
+                   timeout=900)
+    run = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
+                          "mpi_yield_when_idle", "1", "-n", "3", sys.executable, "-c", HOST_PEERS, str(scene_file),
+                          str(tmp_path / "three")], env=env, capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    one, three = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "three" / "final.npz")
+    for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
+        assert np.array_equal(one[name], three[name]), name
+
+
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
 def test_rows_gpu_to_gpu_asked_where_a_rank_cannot_is_an_error(tmp_path):
     """SPHCORE_MPI_EXCHANGE=cuda where a rank has no CUDA device (numba here) stops every rank with one line that
