@@ -2,8 +2,8 @@
 stages' milliseconds go (the backend's submissions, the peers' copies, the pick, the balance). Run under mpiexec as
 parallel_gpu.py is, with its arguments (--warmup: the steps before the timing); after its JSON line, rank 0 prints
 one line a rank, `CALLS rank {call: ms a timed step}` (calls nest: exchange holds pick, swap_peers; swap_peers holds
-pack (run_pack_rows), publish, pull; run_stages: the step's submission, with the received rows' writes and the
-pick):
+pack (run_pack_rows), publish, pull; run_stages: the step's submissions, with the received rows' writes and the
+pick; settle: the wait in the exchange for the step's second submission where the exchange overlaps it):
 
     mpiexec -n 4 python benchmarks/exchange_calls.py --count 33554432 --steps 30 --warmup 100 --out /tmp/calls.json
 """
@@ -56,7 +56,7 @@ def count_steps(step):
 parallel.Rank.step = count_steps(parallel.Rank.step)
 timed(parallel.Rank, "step")
 timed(backends.VulkanBackend, "run_stages", stage_key)
-for name in ("read_regions", "read_rows", "write_rows"):
+for name in ("read_regions", "read_rows", "write_rows", "settle"):
     timed(backends.VulkanBackend, name)
 for name in ("publish", "pull"):
     timed(peers.Peers, name)

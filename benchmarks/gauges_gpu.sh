@@ -1,7 +1,8 @@
 #!/bin/bash
 # The gauges of a run on several GPUs against the 1-rank driver's, byte for byte: scenes/dam_break_obstacle_3d.toml
 # (a pier, a body, with a force gauge on it, a pressure and a height gauge; the cuts along z cross the pier) for
-# $STEPS steps (default 800: the front reaches the pier at 0.16 s, about step 380), run on Vulkan by the 1-rank
+# $STEPS steps (default 800: the front reaches the pier at 0.16 s, about step 380; DT='"auto"': a fixed dt, where the
+# exchange overlaps the step's end), run on Vulkan by the 1-rank
 # driver on the first GPU and by `sphcore run` on 2 ranks (GPU to GPU, and through host memory) and on 4 (GPU to
 # GPU; where there are 4 GPUs), each run's gauges/*.csv and final.npz compared with the 1-rank ones.
 # One JSON line a case in $OUT/gauges_gpu.json (default benchmarks/results/parallel_gpu), logs beside it.
@@ -14,6 +15,7 @@ mkdir -p "$OUT" /tmp/gauges
 OUT=$(realpath "$OUT")
 sed -e "s/^end = .*/steps = ${STEPS:-800}/" -e "s|meshes/|$PWD/scenes/meshes/|" \
     scenes/dam_break_obstacle_3d.toml > /tmp/gauges/pier.toml
+[ -n "${DT:-}" ] && sed -i "/^\[time\]/a dt = $DT" /tmp/gauges/pier.toml
 run() {  # ranks, exchange, folder
     SPHCORE_MPI_EXCHANGE=$2 /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$1" \
         -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR -x SPHCORE_MPI_EXCHANGE \

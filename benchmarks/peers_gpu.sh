@@ -1,7 +1,8 @@
 #!/bin/bash
 # The rows sent from GPU to GPU (sphcore.peers, SPHCORE_MPI_EXCHANGE=cuda) checked on the GPUs of one host: how the
 # GPUs are linked (nvidia-smi topo -m), then scenes/dam_break_3d.toml at spacing $SPACING (default 0.005 m: 184,320
-# particles), $STEPS steps (default 400; adaptive dt, Verlet), run by the 1-rank driver and by `sphcore run` on 2
+# particles), $STEPS steps (default 400; adaptive dt, Verlet; DT='"auto"' a fixed dt, where the exchange overlaps
+# the step's end: parallel.Rank.overlap), run by the 1-rank driver and by `sphcore run` on 2
 # ranks (cuda and host) and on 4 (cuda; where there are 4 GPUs), each final.npz compared bit for bit with the
 # 1-rank one. One JSON line a case in $OUT/peers_gpu.json (default benchmarks/results/parallel_gpu), logs beside it.
 # Run from the repository root with .gl and .whl carried (benchmarks/gpu_env.sh), as benchmarks/parallel_gpu.sh.
@@ -15,6 +16,7 @@ nvidia-smi topo -m | tee "$OUT/topology.txt"
 "$PY" -c "import cuda.bindings; print('cuda-bindings', cuda.bindings.__version__)"
 sed -e "s/^spacing = .*/spacing = ${SPACING:-0.005}/" -e "s/^steps = .*/steps = ${STEPS:-400}/" \
     -e "s/^output_every = .*/output_every = 100000/" scenes/dam_break_3d.toml > /tmp/peers/dam.toml
+[ -n "${DT:-}" ] && sed -i "/^\[time\]/a dt = $DT" /tmp/peers/dam.toml
 GPUS=$(nvidia-smi --query-gpu=name --format=csv,noheader | wc -l)
 run() {  # ranks, exchange, folder
     SPHCORE_MPI_EXCHANGE=$2 /usr/bin/mpiexec --allow-run-as-root --bind-to none -n "$1" \

@@ -35,7 +35,7 @@ SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow
 HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
 # Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), in
 # memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
-MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table", "pack_table")
+MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table")
 # read_regions packs each region from a multiple of PACK_GRAIN bytes: an H100 copied 40 runs of 1.1 MB in 194 us where
 # each run's bytes were a multiple of 16, in 520 us where they were one of 4 (benchmarks/copy_regions.py)
 PACK_GRAIN = 16
@@ -214,9 +214,13 @@ class NumbaBackend:
         """Rows start .. stop - 1 of a buffer (a copy)."""
         return self.state[name][start:stop].copy()
 
+    read_mapped = read_rows  # (Vulkan's: no submission is left running here)
+
     def write_rows(self, name, start, values):
         """Set a buffer's rows from `start` on to `values`."""
         self.state[name][start:start + len(values)] = values
+
+    write_mapped = write_rows  # (Vulkan's: no submission is left running here)
 
     def read_regions(self, regions, into=None):
         """The bytes of rows start .. stop - 1 of buffer `name`, for each (name, start, stop) of `regions`, one
@@ -299,8 +303,12 @@ class NumbaBackend:
         launch(self._launch_groups(self._groups(stage), stage.when), self.local_size,
                stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
-    def run_stages(self, stages, writes=None):
-        """`stages` in order, as run_stage runs each; with `writes` ((parts, move): write_parts') first."""
+    def settle(self):
+        """(Vulkan's: wait for a submission left running; here none is.)"""
+
+    def run_stages(self, stages, writes=None, wait=True):
+        """`stages` in order, as run_stage runs each; with `writes` ((parts, move): write_parts') first. (`wait`:
+        Vulkan's; here every call is done when it returns.)"""
         if writes is not None:
             self.write_parts(*writes)
         for stage in stages:
@@ -479,11 +487,12 @@ class VulkanBackend:
             self._recordings[key] = rec.end()
         return self._recordings[key]
 
-    def _submit(self, rec, writes=None):
-        """Run recording `rec`; with `writes` ((parts, move): write_parts') first, in the same submission."""
+    def _submit(self, rec, writes=None, wait=True):
+        """Run recording `rec`; with `writes` ((parts, move): write_parts') first, in the same submission; `wait`
+        False (no writes, no timer): left running (Context.submit)."""
         self._known.clear()
         if writes is None:
-            self.ctx.submit(rec)
+            self.ctx.submit(rec, wait=wait or rec.timer is not None)
         else:
             self.ctx.write_parts(*self._copied(*writes), then=rec)
         if rec.timer is not None:
@@ -555,13 +564,19 @@ class VulkanBackend:
         self._pipeline(stage.name)
         self._submit(self._recording(1, [stage]))
 
-    def run_stages(self, stages, writes=None):
+    def run_stages(self, stages, writes=None, wait=True):
         """`stages` in order, in one submission (recorded once, as a step is); timed stage by stage where there is a
-        profile. With `writes` ((parts, move): write_parts'), those first, in the same submission."""
+        profile. With `writes` ((parts, move): write_parts'), those first, in the same submission. `wait` False:
+        left running while the host goes on (Context.submit: the next call that touches the device's memory waits
+        for it)."""
         stages = [s if isinstance(s, Stage) else Stage(s) for s in stages]
         for stage in stages:
             self._pipeline(stage.name)
-        self._submit(self._recording(1, stages, timed=self.profile is not None), writes)
+        self._submit(self._recording(1, stages, timed=self.profile is not None), writes, wait)
+
+    def settle(self):
+        """Wait for the submission run_stages left running (wait=False), if any."""
+        self.ctx.settle()
 
     def resize(self, params):
         """Hold `params`' count of particles in place: the buffers keep their size while the count fits (the
@@ -624,6 +639,19 @@ class VulkanBackend:
         """Rows start .. stop - 1 of a buffer, read back from the device."""
         shape = (max(stop - start, 0), *self.shapes[name][1:])
         return self.buffers[name].read(self.dtypes[name], shape, start * self.row_bytes[name])
+
+    def write_mapped(self, name, start, values):
+        """Set rows of a buffer the host maps (MAPPED) now: while a submission run_stages left running goes on (one
+        that does not read them)."""
+        array = np.asarray(values, self.dtypes[name]).reshape(-1, *self.shapes[name][1:])
+        self.buffers[name].write(array, start * self.row_bytes[name], settle=False)
+        self._known.pop(name, None)
+
+    def read_mapped(self, name, start, stop):
+        """Rows start .. stop - 1 of a buffer the host maps (MAPPED), as they are: while a submission run_stages left
+        running goes on (wait=False; one that does not write them)."""
+        shape = (max(stop - start, 0), *self.shapes[name][1:])
+        return self.buffers[name].read(self.dtypes[name], shape, start * self.row_bytes[name], settle=False)
 
     def write_rows(self, name, start, values):
         """Set a buffer's rows from `start` on to `values`, on the device."""

@@ -19,6 +19,9 @@ a rank holds them in. A step:
   [4] the plan's stages (on Vulkan in one submission, two with an adaptive dt), then pick_rows for the next
       exchange: reduce_dt takes the rank's slab's rows alone, and the largest |v|^2 and |a|^2 over the ranks
       (Allreduce) go into its first partial, so every rank's choose_dt takes the same dt, the minimum over the ranks.
+      At a fixed dt (Rank.overlap) the exchange overlaps the step's end: the forces on the rows the pick reads first,
+      the pick (each row as integrate will store it: integrate_row.glsl) and pack_rows; then, left running while the
+      host exchanges those rows ([1]-[2] of the next step), the forces on the other rows and integrate.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
@@ -58,7 +61,7 @@ from sphcore.runner import Schedule, _run_arguments, final_arrays
 from sphcore.signals import Signals
 from sphcore.stage import Stage
 from sphcore.sph.dfsph import CONTROL_REBUILD
-from sphcore.sph.pick_rows import PICK_ALIGN
+from sphcore.sph.pick_table import PICK_ALIGN
 from sphcore.stepper import LOADED, Simulation, wall_particles
 from sphcore.vk_runner import Context
 
@@ -129,6 +132,11 @@ class Stopped(Interrupted):
 HALO = ("particle_x", "particle_v", "particle_rho", "particle_id")
 PACKED = {"particle_x": "scratch_x", "particle_v": "scratch_v", "particle_rho": "scratch_rho",
           "particle_id": "scratch_id", "particle_vh": "scratch_vh"}
+
+
+# The levels (Stage) of a step whose exchange overlaps its end (Rank.overlap): compute_forces' on the rows the pick
+# reads, then on the others; pick_rows' before integrate, each row as integrate will store it.
+PICKED_ROWS, OTHER_ROWS, BEFORE_INTEGRATE = 1, 2, 1
 
 
 def sent_buffers(spec):
@@ -246,6 +254,17 @@ class Rank:
         cut = names.index("reduce_dt") if "reduce_dt" in names else len(names)
         self.before_dt, self.after_dt = sim.stages[:cut + 1], sim.stages[cut + 1:]  # (the dt: over the ranks)
         self.adaptive = cut < len(names)
+        # [4] in two submissions where the step's end is the forces, the gauges, choose_dt and integrate, at a fixed
+        # dt, with no shifting (whose sums are in the pick's scratch_v) and no reused lists: the forces on the rows
+        # the pick reads, the pick (each row as integrate will store it) and the pack; then the other rows' forces and
+        # the rest, left running while the exchange sends the picked rows (overlap)
+        spec, forces = sim.scene.spec, names.index("compute_forces") if "compute_forces" in names else len(names)
+        self.overlap = (self.size > 1 and not self.adaptive and not spec.SHIFTING and not spec.LIST_SKIN
+                        and names[-1:] == ["integrate"]
+                        and set(names[forces + 1:]) <= {"sample_gauges", "choose_dt", "integrate"})
+        self.band = sim.stages[:forces] + [Stage("compute_forces", PICKED_ROWS)]
+        self.inside = [Stage("compute_forces", OTHER_ROWS)] + sim.stages[forces + 1:]
+        self.published = None  # (the outbox the step's pack wrote and published from: the exchange then packs none)
         self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
         self.slabs = Slabs(sim.scene, sim.params)
         self.axis, self.layers, self.per_layer, self.reach = (self.slabs.axis, self.slabs.layers,
@@ -257,6 +276,7 @@ class Rank:
         self.cuts = np.asarray(cuts)
         self.next_cuts = self.cuts.copy()  # (the slabs of the step after the next: pick's)
         self.entries = self.picked = None  # (pick's table, and its counts after the step that picked)
+        self.all_published = False  # (the exchange's: whether every rank published its rows at the step's end)
         self.start_owned = self.held_owned()  # (the start's snapshot)
         self.starts = None  # (no step yet: the held set is not sorted)
         exchange = os.environ.get("SPHCORE_MPI_EXCHANGE", "")
@@ -302,28 +322,45 @@ class Rank:
         """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
         `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the new halo's copies listed),
         stages ([4], the new halo written first in the same submission, the pick of the rows the next step's
-        exchange sends its last stage: none on one rank), dt (the partials read back and their Allreduce)."""
+        exchange sends: none on one rank; where the exchange overlaps the step's end, the wait for its second
+        submission in the exchange too), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
             if self.sim.gauges.since >= self.sim.gauges.slots(self.layers).min():
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
-        writes, place = self.exchange() if self.starts is not None else (None, [])  # [1]-[3]
-        self.write_pick()
-        pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
+        if self.starts is not None:
+            writes, place = self.exchange()  # [1]-[3] (and the pick's table: write_pick)
+        else:
+            writes, place = None, []
+            self.write_pick(self.sim.n)
         start = self.lap("exchange", start)
-        backend = self.sim.backend
+        backend, self.published = self.sim.backend, None
+        pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
         if self.adaptive:  # [4]
             backend.run_stages(place + self.before_dt, writes)
             start = self.lap("stages", start)
             self.reduce_dt(MPI)
             start = self.lap("dt", start)
             backend.run_stages(self.after_dt + pick)
+        elif self.overlap:
+            outbox = self.peers.outbox if self.peers else None
+            if outbox is not None:
+                backend.bind_words("sent", outbox.buffer)
+            pack = [Stage("pack_rows")] if outbox is not None else []
+            backend.run_stages(place + self.band + [Stage("pick_rows", BEFORE_INTEGRATE)] + pack, writes)
         else:
             backend.run_stages(place + self.before_dt + pick, writes)
-        self.starts = np.append(backend.read_rows("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
-        self.picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
+        if self.overlap:
+            backend.run_stages(self.inside, wait=False)  # (waited for in the next exchange, or as the device is read)
+        self.starts = np.append(backend.read_mapped("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
+        self.picked = backend.read_mapped("pick_count", 0, 2 * len(self.entries))
+        if self.overlap and outbox is not None:  # (the rows published while the second submission runs)
+            nbytes = int(self.packed_bytes(self.picked.reshape(-1, 2).astype(np.int64)).sum())
+            if nbytes <= outbox.nbytes and 2 * self.zones().sum() <= self.sim.n:
+                self.peers.publish(nbytes)
+                self.published = outbox
         self.lap("stages", start)
         self.sim.step_count += 1
 
@@ -375,12 +412,15 @@ class Rank:
         lo, hi = self.cuts[r], self.cuts[r + 1]
         first, end = self.owned_rows()
         regions, rows = self.pick()
-        mine = np.zeros(self.layers + 2 * self.size, np.int64)  # (this rank's owned particles per layer, its rows)
+        # (this rank's owned particles per layer, its rows, whether it published them at the step's end: swap_peers)
+        mine = np.zeros(self.layers + 2 * self.size + 1, np.int64)
         mine[lo:hi] = np.diff(starts)[lo:hi]
-        mine[self.layers:] = rows.reshape(-1)
+        mine[self.layers:-1] = rows.reshape(-1)
+        mine[-1] = self.published is not None
         every = np.empty((self.size, len(mine)), np.int64)
         self.comm.Allgather(mine, every)
-        counts, every = every[:, :self.layers].sum(axis=0), every[:, self.layers:].reshape(self.size, self.size, 2)
+        counts, self.all_published = every[:, :self.layers].sum(axis=0), every[:, -1].all()
+        every = every[:, self.layers:-1].reshape(self.size, self.size, 2)
         if counts.sum() != self.total:
             raise SimulationError(f"step {self.sim.step_count}: the ranks own {counts.sum()} particles, not "
                                   f"{self.total}: a particle left the box, or crossed more than a cell layer in a step")
@@ -388,7 +428,8 @@ class Rank:
         # [2] the rows each other rank needs, copied and sent
         swap = self.swap_peers if self.peers else self.swap_shared if self.shared else self.swap
         received_rows, sources, start = swap(regions, every, start)
-        # [3] the new halo in the rows of the old: below the owned rows, then after them
+        # [3] the new halo in the rows of the old: below the owned rows, then after them (what the host decides first,
+        # while the step's second submission may still run: overlap)
         m, owned = int(received_rows.sum()), end - first
         move = None
         if m < first:  # the owned rows' last ones fill the rows the new halo leaves free below them
@@ -396,14 +437,23 @@ class Rank:
             move = end - moved, m, moved
         self.cuts = self.next_cuts
         self.next_cuts = decomposition.balance(counts, self.size, previous=self.cuts, most=1, reach=self.reach)
+        P, n, backend = self.sim.params[0], m + owned, self.sim.backend
+        placed = self.peers and np.count_nonzero(received_rows.sum(axis=1)) <= PICK_ENTRIES
+        self.write_pick(n)  # (the tables only the next step's first submission reads: written as the second runs)
+        if placed:
+            backend.write_mapped("place_table", 0, self.place_table(received_rows, sources, first, end))
+            backend.bind_words("received", self.peers.inbox.buffer)
+        start = self.lap("write", start)
+        backend.settle()
+        waited, start = time.perf_counter() - start, time.perf_counter()
+        self.seconds["stages"] += waited  # (the step's: step times the exchange as a whole, this wait out of it)
+        self.seconds["exchange"] -= waited
         # a resize only where the count or the slab changed, or to have reused lists built (the rows moved and
         # written are listed by row: the buffers keep the rows past a smaller count)
-        P, n = self.sim.params[0], m + owned
         cells = (P["owned_first"], P["owned_end"], P["cells_first"], P["cells_end"])
         if n != self.sim.n or cells != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
             self.sim.resize(n, self.owned_cells())
-        if self.peers and np.count_nonzero(received_rows.sum(axis=1)) <= PICK_ENTRIES:
-            self.place(received_rows, sources, first, end)
+        if placed:
             self.lap("write", start)
             return ([], move), [Stage("place_rows")]
         at, parts = 0, {}  # (every rank's rows in one submission, with the move: its memory's regions)
@@ -420,7 +470,8 @@ class Rank:
         self.lap("write", start)
         return (list(parts.values()), move), []
 
-    def place(self, received_rows, sources, first, end):
+    @staticmethod
+    def place_table(received_rows, sources, first, end):
         """The table of place_rows.comp, the step's first stage where the rows came from GPU to GPU: each sender's
         rows (ranks x 2: `received_rows`) in the inbox (`sources`: the inbox and the offset of each), which the
         device writes over the old halo's rows below the owned rows (`first` .. `end`), then after them."""
@@ -429,8 +480,7 @@ class Rank:
         table[0] = len(senders), first, end, received_rows.sum()
         for s, (offset, (migrants, halo)) in enumerate(senders):
             table[1 + s] = offset // 4, migrants, halo, 0
-        self.sim.backend.write_rows("place_table", 0, table)
-        self.sim.backend.bind_words("received", self.peers.inbox.buffer)
+        return table
 
     def swap(self, regions, every, start):
         """Send each rank its rows: `regions` read back (rank by rank, `every`[s, q]: the rows of migrants and of halo
@@ -474,15 +524,20 @@ class Rank:
 
     def swap_peers(self, regions, every, start):
         """swap's work from device to device (sphcore.peers): this rank's rows packed into its outbox (pack: the
-        bytes `regions` names, as read_regions would pack them) and published, a barrier; then every rank's bytes
-        for this one pulled into its inbox."""
+        bytes `regions` names, as read_regions would pack them) and published, unless the step did both (overlap),
+        a barrier unless every rank's step did; then every rank's bytes for this one pulled into its inbox, and a
+        barrier (no mailbox is written again before every rank has pulled from it)."""
         sizes, offsets = self.offsets(every)
+        outbox = self.peers.outbox
         self.peers.fit(int(sizes.sum(axis=1).max()), int(sizes[:, self.rank].sum()))
-        self.pack(every, offsets)
-        self.peers.publish(int(sizes[self.rank].sum()))
+        if self.published is not self.peers.outbox:  # (none published at the step's end, or from another outbox)
+            self.pack()
+            self.peers.publish(int(sizes[self.rank].sum()))
         start = self.lap("rows", start)
-        self.comm.Barrier()
+        if not self.all_published or self.peers.outbox is not outbox:  # (the same on every rank: fit is collective)
+            self.comm.Barrier()  # (every rank's rows published)
         at = self.peers.pull([(q, int(offsets[q, self.rank]), int(sizes[q, self.rank])) for q in range(self.size)])
+        self.comm.Barrier()  # (every mailbox pulled from: written again at the next step's end)
         return every[:, self.rank], [(self.peers.inbox.buffer, a) for a in at], self.lap("alltoall", start)
 
     @property
@@ -497,11 +552,12 @@ class Rank:
         if self.peers:
             self.peers.close()
 
-    def write_pick(self):
-        """The table of the pick (pick_rows.comp), written before the step whose last stage it is: for each other
-        rank, the layers of this rank's slab near its next slab (`next_cuts`; decomposition.bands), whose rows the
-        step's sort gives (layer_start); of those, the ones then in its slab (its own from the next step on) and
-        those within the halo's width of it. The counts zeroed; `entries`: each entry's rank and layers."""
+    def write_pick(self, n):
+        """The table of the pick (pick_rows.comp) of a step of `n` rows held, written before it, the counts zeroed
+        (into memory the host maps, backends.MAPPED: a submission left running reads none of it, band_rows): for
+        each other rank, the layers of this rank's slab near its next slab (`next_cuts`; decomposition.bands), whose
+        rows the step's sort gives (layer_start); of those, the ones then in its slab (its own from the next step on)
+        and those within the halo's width of it. `entries`: each entry's rank and layers."""
         slabs, cuts = self.slabs, self.next_cuts
         entries = []
         for q in range(self.size):
@@ -513,56 +569,53 @@ class Rank:
                                   f"ranks, more than {PICK_ENTRIES}: run on fewer ranks")
         table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
-        table[0, :2] = len(entries), self.sim.n
+        table[0, :2] = len(entries), n
         for e, (q, first, end) in enumerate(entries):
             lo, hi = (slabs.box_min + cuts[k] * slabs.cell_size for k in (q, q + 1))
             table[1 + e] = first, end, cuts[q], cuts[q + 1]
             bounds[e, :2] = lo - slabs.width if q > 0 else -np.inf, hi + slabs.width if q < self.size - 1 else np.inf
         for name, values in (("pick_table", table), ("pick_bounds", bounds),
                              ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
-            self.sim.backend.write_rows(name, 0, values)  # (on Vulkan mapped memory: backends.MAPPED)
+            self.sim.backend.write_mapped(name, 0, values)
         self.entries = entries
 
     def pick(self):
         """The rows each other rank needs for the next step (write_pick), picked and packed on the device: by the
-        last step's last stage, else now (after a replay), and again where their slots do not fit the rows (room
+        last step's pick_rows, else now (after a replay), and again where their slots do not fit the rows (room
         made: a few rows held, or a slab thinner than the halo: rows several ranks need, each packed once for each).
         Returns the regions to read back (name, first row, end row) rank by rank, the migrants' then the halo's (as
         swap takes them), and the rows of each (ranks x 2)."""
         backend, picked = self.sim.backend, self.picked
         if picked is None:
-            self.write_pick()
-        spans = np.array([self.starts[end] - self.starts[first] for _, first, end in self.entries], np.int64)
-        zones = -(-spans // PICK_ALIGN) * PICK_ALIGN  # (pick_rows.comp: two an entry, migrants and halo)
+            self.write_pick(self.sim.n)
+        zones = self.zones()
         if self.entries and (picked is None or 2 * zones.sum() > self.sim.n):
             if 2 * zones.sum() > self.sim.n:  # (the table's rows held as they were)
                 self.sim.resize(int(2 * zones.sum()), self.owned_cells())
                 backend.write_rows("pick_count", 0, np.zeros(2 * PICK_ENTRIES, np.uint32))
             backend.run_stages([Stage("pick_rows")])
-            picked = backend.read_rows("pick_count", 0, 2 * len(self.entries))
+            picked, self.published = backend.read_rows("pick_count", 0, 2 * len(self.entries)), None
         self.picked = None
-        rows, regions, self.slots = np.zeros((self.size, 2), np.int64), [], []
+        rows, regions = np.zeros((self.size, 2), np.int64), []
         counts = np.zeros((0, 2), np.int64) if picked is None else picked.reshape(-1, 2).astype(np.int64)
         for (q, _, _), base, zone, (migrants, halo) in zip(self.entries, 2 * (np.cumsum(zones) - zones), zones, counts):
             regions += [(PACKED[name], int(base), int(base + migrants)) for name in self.sent[0]]
             regions += [(PACKED[name], int(base + zone), int(base + zone + halo)) for name in self.sent[1]]
             rows[q] = migrants, halo
-            self.slots.append((q, base, base + zone))
         return regions, rows
 
-    def pack(self, every, offsets):
-        """pack_rows.comp, in a submission of its own: the rows picked for each other rank (`every`[rank]: its
-        migrants and halo rows) written from the scratch buffers into the peers' outbox, each rank's from its
-        byte offset there (`offsets`[rank])."""
-        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
-        table[0, :2] = len(self.slots), every[self.rank].sum()
-        for e, (q, migrants_slot, halo_slot) in enumerate(self.slots):
-            table[1 + 2 * e, :3] = offsets[self.rank, q] // 4, *every[self.rank, q]
-            table[2 + 2 * e, :2] = migrants_slot, halo_slot
-        backend = self.sim.backend
-        backend.write_rows("pack_table", 0, table)
-        backend.bind_words("sent", self.peers.outbox.buffer)
-        backend.run_stages([Stage("pack_rows")])
+    def zones(self):
+        """The slots of each of the pick's entries' two zones (pick_table.glsl), from the rows the step's sort gave
+        their layers."""
+        spans = np.array([self.starts[end] - self.starts[first] for _, first, end in self.entries], np.int64)
+        return -(-spans // PICK_ALIGN) * PICK_ALIGN
+
+    def pack(self):
+        """pack_rows.comp, in a submission of its own: the rows the pick counted for each other rank written from the
+        scratch buffers into the peers' outbox, as the step's last stage writes them where the exchange overlaps
+        it."""
+        self.sim.backend.bind_words("sent", self.peers.outbox.buffer)
+        self.sim.backend.run_stages([Stage("pack_rows")])
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""

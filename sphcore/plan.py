@@ -85,7 +85,7 @@ BUFFERS = {
     "received": (np.uint32, 1, 2),
     "place_table": (np.uint32, 4, 1 + PICK_ENTRIES),
     "sent": (np.uint32, 1, 2),
-    "pack_table": (np.uint32, 4, 1 + 2 * PICK_ENTRIES),
+    "band_rows": (np.uint32, 2, 1 + PICK_ENTRIES),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -125,9 +125,11 @@ BUFFERS = {
 # received, place_table: a rank's rows pulled from GPU to GPU (place_rows.comp): on Vulkan the peers' inbox is bound
 # in received's place (backend.bind_words; numba: the bytes' array); the table: the senders, the owned rows' first
 # and end, the rows received, then a row a sender (its first word, its migrants and halo rows).
-# sent, pack_table: the rows a rank sends from GPU to GPU (pack_rows.comp), the peers' outbox bound in sent's place;
-# the table: the entries, the rows sent, then two rows an entry (its first word, migrants and halo rows; the first
-# slot of each in the scratch buffers).
+# band_rows: on a rank whose exchange overlaps the step's end, the rows its pick reads (the entries' first row and
+# count, after their number), which compute_forces' first pass writes for its second (the host writes the pick's
+# table for the next step while that runs: sphcore.parallel).
+# sent: the rows a rank sends from GPU to GPU (pack_rows.comp: those pick_count counts, laid out from the pick's
+# table), the peers' outbox bound in its place.
 # gauge_layers: on a rank, a force or moment gauge's sum over each cell layer, a ring of LAYER_SLOTS samples a gauge
 # (sample_gauges.comp; "gauge_layers": LAYER_SLOTS rows of "layers" a gauge, at least 1 gauge's).
 # obstacle_box: min and max corner of each box obstacle (domain.obstacles), z = 0 in 2D; the first
@@ -159,7 +161,8 @@ STAGES = {
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "particle_id", "cell_pyramid", "cell_start", "scratch_x",
                                                      "obstacle_box", "control", "neighbours",
-                                                     "neighbour_count", "scratch_v")),
+                                                     "neighbour_count", "scratch_v", "pick_table", "layer_start",
+                                                     "band_rows")),
     "wall_pressure": (wall_pressure, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
                                                    "particle_id", "cell_pyramid", "cell_start", "scratch_x",
                                                    "obstacle_box", "neighbours", "neighbour_count")),
@@ -187,11 +190,12 @@ STAGES = {
                                                 "particle_p", "particle_id", "cell_pyramid", "cell_start",
                                                 "time_state", "gauge_table", "gauge_state", "gauge_samples",
                                                 "layer_start", "gauge_layers")),
-    "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
-                                           "scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
-                                           "pick_table", "pick_bounds", "pick_count", "layer_start")),
+    "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_id",
+                                           "particle_vh", "obstacle_box", "time_state", "scratch_x", "scratch_v",
+                                           "scratch_id", "scratch_rho", "scratch_vh", "pick_table", "pick_bounds",
+                                           "pick_count", "layer_start")),
     "pack_rows": (pack_rows, "particles", ("scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
-                                           "sent", "pack_table")),
+                                           "sent", "pick_table", "pick_count", "layer_start")),
     "place_rows": (place_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",
                                              "received", "place_table")),
 }

@@ -376,9 +376,10 @@ def test_place_rows_writes_each_senders_rows(backend, precision):
 @pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 def test_pack_rows_writes_what_read_regions_reads(backend, precision):
-    """pack_rows.comp (the rows a rank sends from GPU to GPU): each entry's migrants and halo rows, from their zones of
-    the scratch buffers, written into the outbox's words at the entry's offset: the bytes read_regions packs of the
-    same rows (each buffer's run from a multiple of 16 bytes), bit for bit."""
+    """pack_rows.comp (the rows a rank sends from GPU to GPU): each entry's migrants and halo rows (pick_count), from
+    its zones of the scratch buffers (the pick's table: its layers' rows, from layer_start), written into the outbox
+    after the entries' before it: the bytes read_regions packs of the same rows (each buffer's run from a multiple of
+    16 bytes), bit for bit; into an outbox 16 bytes too small, nothing."""
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
@@ -389,43 +390,109 @@ def test_pack_rows_writes_what_read_regions_reads(backend, precision):
     scene = sphcore.Scene.from_dict(small_dam_break(precision=precision))
     with sphcore.Simulation(scene, backend, id_order=True) as sim:
         n, b = sim.n, sim.backend
+        layers = int(sim.params[0]["grid_dim"][1])
         rng = np.random.default_rng(3)
         for name in PACKED.values():
             values = b.read_rows(name, 0, n)
             b.write_rows(name, 0, rng.integers(0, 2**31, values.shape).astype(values.dtype))
+        starts = np.append(np.minimum(np.maximum(np.arange(layers) - 3, 0) * 11, n), n)  # (11 rows a layer from 3 on)
+        b.write_rows("layer_start", 0, starts[:-1].astype(np.uint32))
+        entries = [(3, 6, 5, 9), (4, 12, 0, 17), (8, 9, 11, 0)]  # (first and end layer, migrants, halo rows)
+        table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
+        table[0, :2] = len(entries), n
         migrant_buffers, halo_buffers = sent_buffers(scene.spec)
-        entries = [(5, 9, 0, 40), (0, 17, 60, 100), (12, 0, 120, 140)]  # (migrants, halo, their first slots)
-        regions, sizes = [], []
-        for migrants, halo, migrants_slot, halo_slot in entries:
-            regions += [(name, migrants_slot, migrants_slot + migrants) for name in map(PACKED.get, migrant_buffers)]
-            regions += [(name, halo_slot, halo_slot + halo) for name in map(PACKED.get, halo_buffers)]
-            sizes.append(sum(packed(migrants * row_bytes(name, precision)) for name in migrant_buffers)
-                         + sum(packed(halo * row_bytes(name, precision)) for name in halo_buffers))
+        regions, base = [], 0
+        for e, (first, end, migrants, halo) in enumerate(entries):
+            table[1 + e, :2] = first, end
+            zone = -(-(starts[end] - starts[first]) // 4) * 4  # (pick_rows.comp's zones: PICK_ALIGN rows)
+            assert migrants <= zone and halo <= zone
+            regions += [(PACKED[name], base, base + migrants) for name in migrant_buffers]
+            regions += [(PACKED[name], base + zone, base + zone + halo) for name in halo_buffers]
+            base += 2 * zone
+        assert base <= n
+        nbytes = sum(packed((end - first) * row_bytes(next(k for k, v in PACKED.items() if v == name), precision))
+                     for name, first, end in regions)
         expected = np.array(b.read_regions(regions))
-        table = np.zeros((1 + 2 * PICK_ENTRIES, 4), np.uint32)
-        table[0, :2] = len(entries), sum(m + h for m, h, _, _ in entries)
-        for e, ((migrants, halo, migrants_slot, halo_slot), offset) in enumerate(zip(
-                entries, np.cumsum(sizes) - sizes)):
-            table[1 + 2 * e, :3] = offset // 4, migrants, halo
-            table[2 + 2 * e, :2] = migrants_slot, halo_slot
-        b.write_rows("pack_table", 0, table)
-        if backend == "vulkan":
-            buffer = b.ctx.buffer(sum(sizes), "sent")
-            b.bind_words("sent", buffer)
-        else:
-            words = np.zeros(sum(sizes), np.uint8)
-            b.bind_words("sent", words)
-        b.run_stages([Stage("pack_rows")])
-        sent = buffer.read(np.uint8, (sum(sizes),)) if backend == "vulkan" else words
-        at = 0
-        for name, first, end in regions:  # (each run's bytes; the padding between is unset in read_regions')
-            size = (end - first) * row_bytes(next(k for k, v in PACKED.items() if v == name), precision)
-            assert sent[at:at + size].tobytes() == expected[at:at + size].tobytes(), (name, first)
-            at += packed(size)
-        assert at == sum(sizes)
-        if backend == "vulkan":
-            b.bind_words("sent", None)
-            buffer.free()
+        b.write_rows("pick_table", 0, table)
+        b.write_rows("pick_count", 0, np.array([c for *_, m, h in entries for c in (m, h)], np.uint32))
+        for size in (nbytes, nbytes - 16):
+            words = np.full(size // 4, 0xA5A5A5A5, np.uint32)
+            if backend == "vulkan":
+                buffer = b.ctx.buffer(size, "sent")
+                buffer.write(words)
+                b.bind_words("sent", buffer)
+            else:
+                b.bind_words("sent", words.view(np.uint8))
+            b.run_stages([Stage("pack_rows")])
+            sent = buffer.read(np.uint8, (size,)) if backend == "vulkan" else words.view(np.uint8)
+            if size < nbytes:
+                assert (sent.view(np.uint32) == 0xA5A5A5A5).all()
+            else:
+                at = 0
+                for name, first, end in regions:  # (each run's bytes; the padding between is unset in read_regions')
+                    size = (end - first) * row_bytes(next(k for k, v in PACKED.items() if v == name), precision)
+                    assert sent[at:at + size].tobytes() == expected[at:at + size].tobytes(), (name, first)
+                    at += packed(size)
+                assert at == nbytes
+            if backend == "vulkan":
+                b.bind_words("sent", None)
+                buffer.free()
+
+
+@pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
+def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bits(backend):
+    """A rank's step whose exchange overlaps its end (Rank.overlap): compute_forces on the rows the pick reads, the
+    pick before integrate (each row as integrate will store it), then compute_forces on the other rows and the rest
+    of the step (the pick's table rewritten before them, as the next step's is: the second pass takes the rows the
+    first found) give the bits of the step in one pass with the pick after it: every buffer and every picked row
+    (Verlet at a fixed dt, with gauges; at the second step, whose last dt differs from the one before, and later)."""
+    if backend == "vulkan":
+        from conftest import vulkan_or_skip
+        vulkan_or_skip()
+    from sphcore.parallel import PACKED, PICKED_ROWS, OTHER_ROWS, BEFORE_INTEGRATE
+    from sphcore.plan import PICK_ENTRIES
+    from sphcore.stage import Stage
+    from sphcore.stepper import LOADED
+    scene = sphcore.Scene.from_dict(gauged(fixed_dt(small_dam_break())))
+    with sphcore.Simulation(scene, backend, id_order=True) as one, \
+            sphcore.Simulation(scene, backend, id_order=True) as two:
+        names = [stage.name for stage in one.stages]
+        forces = names.index("compute_forces")
+        assert names[forces + 1:] == ["sample_gauges", "choose_dt", "integrate"]
+        layers = int(one.params[0]["grid_dim"][1])
+        table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
+        bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
+        table[0, :2] = 2, one.n
+        table[1:3] = (3, 5, 0, 4), (6, 8, 7, layers)  # (the layers read, the slab's: one below, one above)
+        bounds[:2, :2] = (-np.inf, 0.3), (0.1, np.inf)
+        for steps in (1, 1, 40):  # (the first step, the second, a later one)
+            one.step(steps - 1)
+            two.step(steps - 1)
+            for sim in (one, two):
+                for name, values in (("pick_table", table), ("pick_bounds", bounds),
+                                     ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
+                    sim.backend.write_rows(name, 0, values)
+            one.backend.run_stages(one.stages + [Stage("pick_rows")])
+            two.backend.run_stages(two.stages[:forces] + [Stage("compute_forces", PICKED_ROWS),
+                                                          Stage("pick_rows", BEFORE_INTEGRATE)])
+            whole = table.copy()  # (the next step's table, written as the second pass runs: one entry, every layer)
+            whole[0, 0], whole[1] = 1, (0, layers, 0, 1)
+            two.backend.write_rows("pick_table", 0, whole)
+            two.backend.run_stages([Stage("compute_forces", OTHER_ROWS)] + two.stages[forces + 1:])
+            two.backend.write_rows("pick_table", 0, table)
+            a, b = one.backend.read(), two.backend.read()
+            counts = a["pick_count"][:4].astype(np.int64)
+            assert counts.min() > 0 and np.array_equal(a["pick_count"], b["pick_count"])
+            for name in LOADED + ("particle_a", "time_state", "gauge_samples"):
+                assert np.array_equal(a[name], b[name]), name
+            starts = np.append(a["layer_start"], one.n).astype(np.int64)
+            zones = [-(-(starts[end] - starts[first]) // 4) * 4 for first, end in table[1:3, :2]]
+            assert 2 * sum(zones) <= one.n  # (the pick's zones fit: it writes its rows)
+            bases = np.repeat(2 * (np.cumsum(zones) - zones), 2) + np.tile([0, 1], 2) * np.repeat(zones, 2)
+            rows = np.concatenate([np.arange(base, base + count) for base, count in zip(bases, counts)])
+            for name, packed in PACKED.items():  # (the picked rows, in id order: a zone's order is the scheduler's)
+                assert np.array_equal(a[packed][rows][np.argsort(a["scratch_id"][rows])],
+                                      b[packed][rows][np.argsort(b["scratch_id"][rows])]), name
 
 
 @pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
@@ -608,6 +675,12 @@ def read_points(path):
     return vtk_to_numpy(reader.GetOutput().GetPoints().GetData())
 
 
+def fixed_dt(config):
+    """`config` at a fixed dt (time.dt "auto": the stability bound's, set once), where a rank's exchange overlaps the
+    step's end (parallel.Rank.overlap)."""
+    return {**config, "time": {**config["time"], "dt": "auto"}}
+
+
 def small_dam_break_3d():
     """A 3D column (6 x 8 x 16 = 768 particles at 0.025 m) falling along z, the slabs' axis."""
     return {"name": "dam_break_3d_mpi", "physics": {"model": "engineering", "dimension": 3, "equation_of_state": "tait"},
@@ -716,10 +789,10 @@ def test_a_rank_samples_the_gauges_of_its_slab(backend):
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(small_dam_break_3d()),
-                                    gauged(small_dam_break(precision="float64")),
+@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(fixed_dt(small_dam_break_3d())),
+                                    gauged(fixed_dt(small_dam_break(precision="float64"))),
                                     gauged(small_dam_break(list_skin=0.2))],
-                         ids=["2d", "3d", "2d_float64", "2d_list_skin"])
+                         ids=["2d", "3d_fixed_dt", "2d_float64_fixed_dt", "2d_list_skin"])
 def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     """`mpiexec -n 2 sphcore run` of a dam break (particles cross the cuts as the column falls) gives bitwise the
     final state and the gauges of the same driver on one rank, and its checkpoint resumes on one rank to the same
@@ -812,7 +885,8 @@ def test_a_two_rank_run_resumes_on_three_ranks_bitwise(tmp_path):
 
 @pytest.mark.vulkan
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(small_dam_break_3d())], ids=["2d", "3d"])
+@pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(fixed_dt(small_dam_break_3d()))],
+                         ids=["2d", "3d_fixed_dt"])
 def test_dam_break_on_two_ranks_on_lavapipe(tmp_path, config):
     """The 2D and 3D dam breaks on 2 ranks on Vulkan (both on lavapipe here): bitwise the 1-rank driver on Vulkan,
     and bitwise the 2-rank run on numba, the gauges too; the halo through shared memory (Vulkan: the device copies
@@ -975,13 +1049,14 @@ class HostPeers:
         self.rank, self.mailboxes, self.outbox, self.inbox = comm.Get_rank(), parallel.Shared(comm, backend), None, None
 
     def fit(self, send, receive):
-        self.mailboxes.fit(send)  # (collective: every rank asks for the same)
+        self.mailboxes.fit(room(send))  # (collective: every rank asks for the same; as large as an outbox)
         for name, nbytes in (("outbox", send), ("inbox", receive)):
             if getattr(self, name) is None or nbytes > getattr(self, name).nbytes:
                 setattr(self, name, Box(np.zeros(room(nbytes), np.uint8), None, None, room(nbytes)))
 
     def publish(self, nbytes):
         self.mailboxes.buffers[self.rank][:nbytes] = self.outbox.buffer[:nbytes]
+        PUBLISHED[sys._getframe(1).f_code.co_name] += 1  # (at the step's end: step; after the pick: swap_peers)
 
     def pull(self, sources):
         offsets, at = [], 0
@@ -995,28 +1070,41 @@ class HostPeers:
         self.mailboxes.close()
 
 
+PUBLISHED = {"step": 0, "swap_peers": 0}
 parallel.Peers.make = classmethod(lambda cls, comm, backend, required=False: HostPeers(comm, backend))
 parallel.main(dict(scene=sphcore.Scene.load(sys.argv[1]), out_dir=sys.argv[2], progress=False))  # (an error aborts all)
+print("PUBLISHED", PUBLISHED["step"], PUBLISHED["swap_peers"], flush=True)
 """
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-def test_the_path_from_gpu_to_gpu_on_host_memory_is_bitwise_one_rank(tmp_path):
+@pytest.mark.parametrize("ranks, spacing, when", [(3, 0.02, "after the pick"), (2, 0.0125, "at the step's end")])
+def test_the_path_from_gpu_to_gpu_on_host_memory_is_bitwise_one_rank(tmp_path, ranks, spacing, when):
     """The exchange from GPU to GPU (pack_rows into the outbox, the peers' publish and pull, place_rows from the
-    inbox: what CI has no GPU for), its CUDA calls done on host memory: a dam break on 3 ranks (one inside, its rows
-    from two senders) ends bitwise where the 1-rank driver does, on numba."""
+    inbox: what CI has no GPU for), its CUDA calls done on host memory, at a fixed dt (the exchange overlapping the
+    step's end): a dam break ends bitwise where the 1-rank driver does, on numba. On 3 ranks (one inside, its rows
+    from two senders) the slabs are too thin for the pick's zones, so each step's rows are picked again and published
+    after the exchange's pick; on 2 ranks at a finer spacing they fit, and are published at the step's end."""
+    config = fixed_dt(small_dam_break(steps=150))
+    config["fluid"] = {**config["fluid"], "spacing": spacing}
     scene_file = tmp_path / "dam.toml"
-    scene_file.write_text(toml(small_dam_break(steps=150)))
+    scene_file.write_text(toml(config))
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_WAIT_POLICY": "passive"}
     subprocess.run([sys.executable, "-c", ONE_RANK, str(scene_file), str(tmp_path / "one")], env=env, check=True,
                    timeout=900)
     run = subprocess.run([mpiexec(), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca",
-                          "mpi_yield_when_idle", "1", "-n", "3", sys.executable, "-c", HOST_PEERS, str(scene_file),
-                          str(tmp_path / "three")], env=env, capture_output=True, text=True, timeout=900)
+                          "mpi_yield_when_idle", "1", "-n", str(ranks), sys.executable, "-c", HOST_PEERS,
+                          str(scene_file), str(tmp_path / "many")], env=env, capture_output=True, text=True,
+                         timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
-    one, three = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "three" / "final.npz")
+    one, many = np.load(tmp_path / "one" / "final.npz"), np.load(tmp_path / "many" / "final.npz")
     for name in ("position", "velocity", "density", "pressure", "time", "dt", "step"):
-        assert np.array_equal(one[name], three[name]), name
+        assert np.array_equal(one[name], many[name]), name
+    published = [tuple(map(int, line.split()[1:])) for line in run.stdout.splitlines() if line.startswith("PUBLISHED")]
+    assert len(published) == ranks
+    # each rank's publishes at a step's end and after an exchange's pick: the first exchange's (no outbox before)
+    # after, then every other step's at its end (the last step's too); or every exchange's after
+    assert published == ranks * [(149, 1) if when == "at the step's end" else (0, 149)]
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")

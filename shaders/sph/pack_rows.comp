@@ -2,9 +2,9 @@
 // After a step of a rank of sphcore.parallel whose rows go from GPU to GPU (sphcore.peers: its outbox): the rows
 // pick_rows.comp packed into the scratch buffers, written into `sent` as each other rank takes them (place_rows.comp),
 // one invocation per row sent (a copy command a buffer's run ran on the copy engine, about a tenth of the memory's
-// bandwidth), each entry's (another rank's) as packed_rows.glsl lays them out. pack_table[0]: the entries, the rows
-// sent; pack_table[1 + 2e]: entry e's first word in `sent`, its migrants and halo rows; pack_table[2 + 2e]: the first
-// slot of its migrants and of its halo in the scratch buffers (pick_rows.comp's zones).
+// bandwidth), each entry's (another rank's: pick_table.glsl) after the entries' before it, as packed_rows.glsl lays
+// them out: its migrants and halo rows those pick_rows.comp counted (pick_count), in its zones of the scratch buffers.
+// Where the rows do not fit in `sent` nothing is written (the host makes room and packs again).
 // Mirror: sphcore/sph/pack_rows.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;
@@ -19,7 +19,10 @@ layout(std430, binding = 13) readonly buffer ScratchId { uint scratch_id[]; };
 layout(std430, binding = 18) readonly buffer ScratchRho { real scratch_rho[]; };
 layout(std430, binding = 40) readonly buffer ScratchVh { real4 scratch_vh[]; };
 layout(std430, binding = 43) writeonly buffer Sent { uint sent[]; };
-layout(std430, binding = 44) readonly buffer PackTable { uvec4 pack_table[]; };
+layout(std430, binding = 35) readonly buffer PickTable { uvec4 pick_table[]; };
+layout(std430, binding = 37) readonly buffer PickCount { uint pick_count[]; };
+layout(std430, binding = 38) readonly buffer LayerStart { uint layer_start[]; };
+#include "pick_table.glsl"
 
 #ifdef SPHCORE_FLOAT64
 void put_real(uint w, real value) {
@@ -38,27 +41,43 @@ void put_real4(uint w, real4 value) {
 void main() {
     // [1] one invocation per row sent
     uint a = gl_GlobalInvocationID.x;
-    if (a >= pack_table[0].y) return;
-    // [2] its entry: the first whose rows (migrants, then halo) reach past it
-    uint e = 0u;
+    // [2] its entry: the first whose rows (migrants, then halo) reach past it; its first row sent and word in `sent`,
+    //     its zones' first slot and their size; the words of every entry's rows
+    uint entries = pick_table[0].x;
+    uint e = entries;
     uint at = 0u;
-    while (a >= at + pack_table[1u + 2u * e].y + pack_table[1u + 2u * e].z) {
-        at += pack_table[1u + 2u * e].y + pack_table[1u + 2u * e].z;
-        e++;
+    uint w = 0u;
+    uint slot = 0u;
+    uint zone = 0u;
+    uint rows = 0u;
+    uint words = 0u;
+    uint base = 0u;
+    for (uint f = 0u; f < entries; f++) {
+        uint migrants = pick_count[2u * f];
+        uint halo = pick_count[2u * f + 1u];
+        uint slots = zone_of(entry_rows(f).y);
+        if (e == entries && a < rows + migrants + halo) {
+            e = f;
+            at = rows;
+            w = words;
+            slot = base;
+            zone = slots;
+        }
+        rows += migrants + halo;
+        words += migrant_words(migrants) + halo_words(halo);
+        base += 2u * slots;
     }
-    uvec4 entry = pack_table[1u + 2u * e];
-    uvec4 slots = pack_table[2u + 2u * e];
+    if (e == entries || words > uint(sent.length())) return;
     // [3] the runs it goes in: the migrants', else past them the halo's; its slot
     uint j = a - at;
-    uint w = entry.x;
-    uint count = entry.y;
-    bool migrant = j < entry.y;
-    uint k = slots.x + j;
+    uint count = pick_count[2u * e];
+    bool migrant = j < count;
+    uint k = slot + j;
     if (!migrant) {
-        w += migrant_words(entry.y);
-        j -= entry.y;
-        count = entry.z;
-        k = slots.y + j;
+        w += migrant_words(count);
+        j -= count;
+        count = pick_count[2u * e + 1u];
+        k = slot + zone + j;
     }
     // [4] store
     put_real4(w + j * 4u * REAL_WORDS, scratch_x[k]);

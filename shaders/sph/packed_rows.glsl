@@ -13,9 +13,15 @@ const uint REAL_WORDS = 1u;
 // The words of a run of `rows` rows of `words` words each, from a multiple of 16 bytes (4 words).
 uint run_words(uint rows, uint words) { return (rows * words + 3u) / 4u * 4u; }
 
-// The words of the migrants' runs of `migrants` rows: where the halo's start.
+// The words of the halo's runs of `halo` rows.
+uint halo_words(uint halo) {
+    return 2u * run_words(halo, 4u * REAL_WORDS) + run_words(halo, REAL_WORDS) + run_words(halo, 1u);
+}
+
+// The words of the migrants' runs of `migrants` rows (the halo's, and Verlet's half-step velocity): where the halo's
+// start.
 uint migrant_words(uint migrants) {
-    uint words = 2u * run_words(migrants, 4u * REAL_WORDS) + run_words(migrants, REAL_WORDS) + run_words(migrants, 1u);
+    uint words = halo_words(migrants);
     if (VERLET) words += run_words(migrants, 4u * REAL_WORDS);
     return words;
 }

@@ -18,6 +18,7 @@ from numba import njit
 from sphcore.sph.cohesion import cohesion
 from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.kernels import kernels
+from sphcore.sph.pick_table import pick_table_functions
 from sphcore.sph.pairs import pairs
 from sphcore.sph.pressure import pressure
 from sphcore.sph.shifting import shifting
@@ -25,6 +26,15 @@ from sphcore.sph.viscosity import viscosity
 from sphcore.sph.walk import walk
 from sphcore.sph.walls import walls
 from sphcore.workgroups import launcher
+
+
+@njit
+def band_row(i, band_rows):
+    """Whether row i is one the pick reads, as the first pass found them (band_rows)."""
+    for e in range(np.int64(band_rows[0, 0])):
+        if i >= np.int64(band_rows[1 + e, 0]) and i - np.int64(band_rows[1 + e, 0]) < np.int64(band_rows[1 + e, 1]):
+            return True
+    return False
 
 
 @lru_cache(maxsize=None)
@@ -38,6 +48,7 @@ def compute_forces(spec, real=np.float32):
     kernel_laplacian = kernels(spec, real).kernel_laplacian
     pressure_monaghan = pressure(real)
     pair_direction = pairs(real)
+    picked_row, entry_rows = pick_table_functions(spec).picked_row, pick_table_functions(spec).entry_rows
     cohesion_becker = cohesion(spec, real)
     shifting_lind = shifting(spec, real).shifting_lind
 
@@ -93,17 +104,27 @@ def compute_forces(spec, real=np.float32):
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, particle_id,
                             cell_pyramid, cell_start, scratch_x, obstacle_box, control, neighbours,
-                            neighbour_count, particle_shift):
+                            neighbour_count, particle_shift, pick_table, layer_start, band_rows):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
         #     (P.owned_end > 0) the rows the sort gave its slab's cells alone: nothing reads a halo row's
         #     acceleration (the next exchange writes over the row)
+        if P.level == 1 and i == 0:  # (the first pass's rows for the second: pick_table is the next step's by then)
+            band_rows[0, 0] = pick_table[0, 0]
+            for e in range(np.int64(pick_table[0, 0])):
+                band_rows[1 + e, 0], band_rows[1 + e, 1] = entry_rows(P, e, pick_table, layer_start)
         if i >= P.n:
             return
         if P.owned_end > 0 and (i < cell_start[P.owned_first] or (P.owned_end < P.cell_total
                                                                   and i >= cell_start[P.owned_end])):
             if LIST_SKIN > 0 and i == 0:
                 control[CONTROL_REBUILD] = 0
+            return
+        #     A rank whose exchange overlaps the step's end runs two passes: D.level 1 the rows its pick reads, which
+        #     it sends before the second, D.level 2 the others (pick_table.glsl, band_rows); else (0) one takes
+        #     every row
+        if P.level > 0 and (picked_row(P, i, pick_table, layer_start) if P.level == 1 else band_row(i, band_rows)) \
+                != (P.level == 1):
             return
         # [2] own state (BODIES: whether i is a wall particle)
         wall_i = BODIES and particle_id[i] >= P.fluid_count

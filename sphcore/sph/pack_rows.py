@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.packed_rows import packed_rows, run_words
+from sphcore.sph.pick_table import pick_table_functions, zone_of
 from sphcore.workgroups import launcher
 
 
@@ -17,32 +18,45 @@ from sphcore.workgroups import launcher
 def pack_rows(spec, real=np.float32):
     VERLET = spec.VERLET
     REAL_WORDS = np.dtype(real).itemsize // 4
-    migrant_words = packed_rows(spec, real)
+    migrant_words, halo_words = packed_rows(spec, real)
+    entry_rows = pick_table_functions(spec).entry_rows
 
     @njit
-    def pack_rows_main(a, params, scratch_x, scratch_v, scratch_id, scratch_rho, scratch_vh, sent, pack_table):
+    def pack_rows_main(a, params, scratch_x, scratch_v, scratch_id, scratch_rho, scratch_vh, sent, pick_table,
+                       pick_count, layer_start):
+        P = params[0]
         reals = sent.view(real)
         # [1] one invocation per row sent
-        if a >= np.int64(pack_table[0, 1]):
+        # [2] its entry: the first whose rows (migrants, then halo) reach past it; its first row sent and word in
+        #     `sent`, its zones' first slot and their size; the words of every entry's rows
+        entries = np.int64(pick_table[0, 0])
+        e = entries
+        at = w = slot = zone = rows = words = base = 0
+        for f in range(entries):
+            migrants = np.int64(pick_count[2 * f])
+            halo = np.int64(pick_count[2 * f + 1])
+            slots = zone_of(entry_rows(P, f, pick_table, layer_start)[1])
+            if e == entries and a < rows + migrants + halo:
+                e = f
+                at = rows
+                w = words
+                slot = base
+                zone = slots
+            rows += migrants + halo
+            words += migrant_words(migrants) + halo_words(halo)
+            base += 2 * slots
+        if e == entries or words > len(sent):
             return
-        # [2] its entry: the first whose rows (migrants, then halo) reach past it
-        e = 0
-        at = 0
-        while a >= at + np.int64(pack_table[1 + 2 * e, 1]) + np.int64(pack_table[1 + 2 * e, 2]):
-            at += np.int64(pack_table[1 + 2 * e, 1]) + np.int64(pack_table[1 + 2 * e, 2])
-            e += 1
-        migrants, halo = np.int64(pack_table[1 + 2 * e, 1]), np.int64(pack_table[1 + 2 * e, 2])
         # [3] the runs it goes in: the migrants', else past them the halo's; its slot
         j = a - at
-        w = np.int64(pack_table[1 + 2 * e, 0])
-        count = migrants
-        migrant = j < migrants
-        k = np.int64(pack_table[2 + 2 * e, 0]) + j
+        count = np.int64(pick_count[2 * e])
+        migrant = j < count
+        k = slot + j
         if not migrant:
-            w += migrant_words(migrants)
-            j -= migrants
-            count = halo
-            k = np.int64(pack_table[2 + 2 * e, 1]) + j
+            w += migrant_words(count)
+            j -= count
+            count = np.int64(pick_count[2 * e + 1])
+            k = slot + zone + j
         # [4] store
         for c in range(4):  # (a vec4)
             reals[(w + j * 4 * REAL_WORDS) // REAL_WORDS + c] = scratch_x[k, c]

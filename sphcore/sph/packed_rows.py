@@ -17,15 +17,22 @@ def run_words(rows, words):
 
 @lru_cache(maxsize=None)
 def packed_rows(spec, real=np.float32):
+    """(migrant_words, halo_words) of `spec`'s rows at precision `real`."""
     VERLET = spec.VERLET
     REAL_WORDS = np.dtype(real).itemsize // 4
 
     @njit
+    def halo_words(halo):
+        """The words of the halo's runs of `halo` rows."""
+        return 2 * run_words(halo, 4 * REAL_WORDS) + run_words(halo, REAL_WORDS) + run_words(halo, 1)
+
+    @njit
     def migrant_words(migrants):
-        """The words of the migrants' runs of `migrants` rows: where the halo's start."""
-        words = 2 * run_words(migrants, 4 * REAL_WORDS) + run_words(migrants, REAL_WORDS) + run_words(migrants, 1)
+        """The words of the migrants' runs of `migrants` rows (the halo's, and Verlet's half-step velocity): where
+        the halo's start."""
+        words = halo_words(migrants)
         if VERLET:
             words += run_words(migrants, 4 * REAL_WORDS)
         return words
 
-    return migrant_words
+    return migrant_words, halo_words

@@ -17,7 +17,7 @@ from sphcore.workgroups import launcher
 def place_rows(spec, real=np.float32):
     VERLET = spec.VERLET
     REAL_WORDS = np.dtype(real).itemsize // 4
-    migrant_words = packed_rows(spec, real)
+    migrant_words = packed_rows(spec, real)[0]
 
     @njit
     def place_rows_main(a, params, particle_x, particle_v, particle_rho, particle_id, particle_vh, received,

@@ -19,9 +19,9 @@ VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 CONDITIONAL_RENDERING = "VK_EXT_conditional_rendering"
 HOST_MEMORY = "VK_EXT_external_memory_host"
 MEMORY_FD = "VK_KHR_external_memory_fd"
-SPIN_SECONDS = 0.002  # a GPU's fence polled this long before the host waits for it (submit: a wait returned 26-29 us
-# later than polling for a copy on an H200, benchmarks/submit_latency.py; not on a CPU device, whose threads the
-# polling slows)
+SPIN_SECONDS = 0.01  # a GPU's fence polled this long before the host waits for it (submit: a wait returned 26-29 us
+# later than polling for a copy on an H200, benchmarks/submit_latency.py; a step's submission on a rank of 4 H200s
+# takes 2-4 ms; not on a CPU device, whose threads the polling slows)
 STAGING_KEPT = 1 << 20  # bytes of the staging buffer a Context keeps for copies, at least
 STAGING_MOST = 1 << 28  # ... and at most: a copy past that allocates its own
 
@@ -86,13 +86,16 @@ class Buffer:
             ctx, nbytes, name, buffer, memory, False, None)
         return made
 
-    def write(self, array, offset=0):
-        """Write `array`'s bytes into the buffer from byte `offset` on."""
+    def write(self, array, offset=0, settle=True):
+        """Write `array`'s bytes into the buffer from byte `offset` on: after the submission left running
+        (Context.submit), or with `settle` False into a host-visible buffer now."""
         data = np.ascontiguousarray(array)
         if offset + data.nbytes > self.nbytes:
             raise ValueError(f"{self.name}: {data.nbytes} bytes at {offset} do not fit in {self.nbytes}")
         if data.nbytes == 0:
             return
+        if settle or not self.host_visible:
+            self.ctx.settle()
         if self.host_visible:
             self.bytes[offset:offset + data.nbytes] = data.reshape(-1).view(np.uint8)
         else:
@@ -101,11 +104,14 @@ class Buffer:
             self.ctx._copy(staging.buffer, self.buffer, [(0, offset, data.nbytes)])
             self.ctx._release(staging)
 
-    def read(self, dtype, shape, offset=0):
-        """The buffer's bytes from byte `offset` on, as an array of `dtype` and `shape`."""
+    def read(self, dtype, shape, offset=0, settle=True):
+        """The buffer's bytes from byte `offset` on, as an array of `dtype` and `shape`: after the submission left
+        running (Context.submit), or with `settle` False from a host-visible buffer as they are now."""
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
         if nbytes == 0:
             return np.zeros(shape, dtype)
+        if settle or not self.host_visible:
+            self.ctx.settle()
         if self.host_visible:
             return self.bytes[offset:offset + nbytes].copy().view(dtype).reshape(shape)
         staging = self.ctx._staging(nbytes)
@@ -123,6 +129,7 @@ class Buffer:
     def free(self):
         if self.buffer is not None:
             vk = self.ctx.vk
+            self.ctx.settle()
             if self.bytes is not None:
                 self.bytes = None  # (the view dies before its memory is unmapped)
                 vk.vkUnmapMemory(self.ctx.device, self.memory)
@@ -210,6 +217,7 @@ class Pipeline:
             dstArrayElement=0, descriptorCount=1, descriptorType=kind,
             pBufferInfo=[vk.VkDescriptorBufferInfo(buffer=buf.buffer, offset=0, range=WHOLE_SIZE)])
             for b, buf, kind in kinds]
+        self.ctx.settle()  # (a descriptor set a submission left running uses is not updated)
         vk.vkUpdateDescriptorSets(self.ctx.device, len(writes), writes, 0, None)
 
     def free(self):
@@ -346,6 +354,7 @@ class Recording:
         return self
 
     def free(self):
+        self.ctx.settle()
         self.ctx.vk.vkFreeCommandBuffers(self.ctx.device, self.ctx.command_pool, 1, [self.command_buffer])
 
 
@@ -462,8 +471,9 @@ class Context:
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
             flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT), None)
-        self.fence = vk.vkCreateFence(self.device, vk.VkFenceCreateInfo(
-            sType=vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None)
+        self.fence, self.running_fence = (vk.vkCreateFence(self.device, vk.VkFenceCreateInfo(
+            sType=vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None) for _ in range(2))
+        self.running = False  # (a submission left running: submit's wait=False)
         self._kept_staging = {}  # (_staging: a buffer kept for each use)
 
     # ---- instance and device ----
@@ -762,32 +772,58 @@ class Context:
     def timer(self, slots):
         return Timer(self, slots)
 
-    def submit(self, *recordings):
-        """Run finished recordings, in order, in one submission and wait for it."""
+    def submit(self, *recordings, wait=True):
+        """Run finished recordings, in order, in one submission and wait for it; with `wait` False, leave it running
+        (one at a time): every later call that reads or writes the device's memory from the host, updates a
+        descriptor set or frees what it may use waits for it first (settle). A later submission runs after it."""
         vk = self.vk
+        if not wait:
+            self.settle()  # (one left running at a time)
+        fence = self.fence if wait else self.running_fence
         try:
             vk.vkQueueSubmit(self.queue, 1, [vk.VkSubmitInfo(
                 sType=vk.VK_STRUCTURE_TYPE_SUBMIT_INFO, commandBufferCount=len(recordings),
-                pCommandBuffers=[recording.command_buffer for recording in recordings])], self.fence)
-            if self.device_type != "CPU":  # (polled a while first: a short submission is known done sooner)
+                pCommandBuffers=[recording.command_buffer for recording in recordings])], fence)
+        except (vk.VkError, vk.VkException) as e:
+            self._failed(e)
+        if wait:
+            self._wait(self.fence)
+        else:
+            self.running = True
+
+    def settle(self):
+        """Wait for the submission left running (submit's wait=False), if any."""
+        if self.running:
+            self.running = False
+            self._wait(self.running_fence)
+
+    def _wait(self, fence):
+        """Wait for `fence` (polled a while first on a GPU: a short submission is known done sooner), and reset it."""
+        vk = self.vk
+        try:
+            if self.device_type != "CPU":
                 until = time.perf_counter() + SPIN_SECONDS
-                while vk.lib.vkGetFenceStatus(self.device, self.fence) == vk.VK_NOT_READY and \
-                        time.perf_counter() < until:
+                while vk.lib.vkGetFenceStatus(self.device, fence) == vk.VK_NOT_READY and time.perf_counter() < until:
                     pass
-            vk.vkWaitForFences(self.device, 1, [self.fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
-        except vk.VkErrorDeviceLost:
+            vk.vkWaitForFences(self.device, 1, [fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
+        except (vk.VkError, vk.VkException) as e:
+            self._failed(e)
+        vk.vkResetFences(self.device, 1, [fence])
+
+    def _failed(self, e):
+        """The VulkanError of a submission or a wait that raised `e`."""
+        vk = self.vk
+        if isinstance(e, vk.VkErrorDeviceLost):
             raise VulkanError(f"the Vulkan device was lost ({self.device_name}): its driver reset it (a fault, "
                               "a time-out, or another program); retry, or run with --backend numba") from None
-        except (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory):
+        if isinstance(e, (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory)):
             raise VulkanError(f"out of device memory while running on {self.device_name}: "
                               "use fewer particles or --backend numba") from None
-        except vk.VkTimeout:
+        if isinstance(e, vk.VkTimeout):
             raise VulkanError(f"{self.device_name} did not finish one submission in {FENCE_TIMEOUT_NS // 10**9} s: "
                               "use fewer particles or --backend numba") from None
-        except (vk.VkError, vk.VkException) as e:
-            raise VulkanError(f"running on {self.device_name} failed ({type(e).__name__}): retry, or run with "
-                              "--backend numba") from None
-        vk.vkResetFences(self.device, 1, [self.fence])
+        raise VulkanError(f"running on {self.device_name} failed ({type(e).__name__}): retry, or run with "
+                          "--backend numba") from None
 
     def close(self):
         vk = self.vk
@@ -799,7 +835,8 @@ class Context:
             pass  # nothing runs on a lost device any more; its objects are destroyed all the same
         for staging in self._kept_staging.values():
             staging.free()
-        vk.vkDestroyFence(self.device, self.fence, None)
+        for fence in (self.fence, self.running_fence):
+            vk.vkDestroyFence(self.device, fence, None)
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
         self.device = None  # the instance is shared by every Context of this process (see _INSTANCES)
