@@ -48,7 +48,8 @@ def compute_forces(spec, real=np.float32):
     kernel_laplacian = kernels(spec, real).kernel_laplacian
     pressure_monaghan = pressure(real)
     pair_direction = pairs(real)
-    picked_row, entry_rows = pick_table_functions(spec).picked_row, pick_table_functions(spec).entry_rows
+    table = pick_table_functions(spec)
+    entry_rows, picked_row = table.entry_rows, table.picked_row
     cohesion_becker = cohesion(spec, real)
     shifting_lind = shifting(spec, real).shifting_lind
 

@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from sphcore.sph.packed_rows import packed_rows, run_words
-from sphcore.sph.pick_table import pick_table_functions, zone_of
+from sphcore.sph.pick_table import pick_table_functions
 from sphcore.workgroups import launcher
 
 
@@ -19,7 +19,8 @@ def pack_rows(spec, real=np.float32):
     VERLET = spec.VERLET
     REAL_WORDS = np.dtype(real).itemsize // 4
     migrant_words, halo_words = packed_rows(spec, real)
-    entry_rows = pick_table_functions(spec).entry_rows
+    table = pick_table_functions(spec)
+    entry_rows, zone_of = table.entry_rows, table.zone_of
 
     @njit
     def pack_rows_main(a, params, scratch_x, scratch_v, scratch_id, scratch_rho, scratch_vh, sent, pick_table,

@@ -14,7 +14,7 @@ from numba import njit
 
 from sphcore.sph.cells import cells
 from sphcore.sph.integrate_row import integrate_row
-from sphcore.sph.pick_table import PICK_ALIGN, pick_table_functions, zone_of  # noqa: F401 (PICK_ALIGN: parallel's)
+from sphcore.sph.pick_table import pick_table_functions
 from sphcore.workgroups import launcher
 
 
@@ -23,7 +23,7 @@ def pick_rows(spec, real=np.float32):
     DIM, VERLET, BODIES = spec.DIM, spec.VERLET, spec.BODIES
     cell_of = cells(spec, real).cell_of
     table = pick_table_functions(spec)
-    entry_rows, picked_row = table.entry_rows, table.picked_row
+    entry_rows, zone_of, picked_row = table.entry_rows, table.zone_of, table.picked_row
     integrated = integrate_row(spec, real)
     NO_SHIFT = (real(0.0), real(0.0), real(0.0), real(0.0))
 

@@ -11,13 +11,7 @@ from numba import njit
 
 PICK_ALIGN = 4  # rows: 16 bytes of a 4-byte buffer
 
-PickTable = namedtuple("PickTable", "row_of entry_rows picked_row")
-
-
-@njit
-def zone_of(rows):
-    """The slots of each of an entry's two zones (migrants, halo): its rows rounded up to PICK_ALIGN."""
-    return (rows + PICK_ALIGN - 1) // PICK_ALIGN * PICK_ALIGN
+PickTable = namedtuple("PickTable", "row_of entry_rows zone_of picked_row")
 
 
 @lru_cache(maxsize=None)
@@ -36,6 +30,11 @@ def pick_table_functions(spec):
         return first, row_of(P, np.int64(pick_table[1 + e, 1]), pick_table, layer_start) - first
 
     @njit
+    def zone_of(rows):
+        """The slots of each of an entry's two zones (migrants, halo): its rows rounded up to PICK_ALIGN."""
+        return (rows + PICK_ALIGN - 1) // PICK_ALIGN * PICK_ALIGN
+
+    @njit
     def picked_row(P, i, pick_table, layer_start):
         """Whether row i is an entry's (one the pick reads)."""
         for e in range(np.int64(pick_table[0, 0])):
@@ -44,4 +43,4 @@ def pick_table_functions(spec):
                 return True
         return False
 
-    return PickTable(row_of, entry_rows, picked_row)
+    return PickTable(row_of, entry_rows, zone_of, picked_row)
