@@ -3,7 +3,8 @@ stages' milliseconds go (the backend's submissions, the peers' copies, the pick,
 parallel_gpu.py is, with its arguments (--warmup: the steps before the timing); after its JSON line, rank 0 prints
 one line a rank, `CALLS rank {call: ms a timed step}` (calls nest: exchange holds pick, swap_peers; swap_peers holds
 pack (run_pack_rows), publish, pull; run_stages: the step's submissions, with the received rows' writes and the
-pick; settle: the wait in the exchange for the step's second submission where the exchange overlaps it):
+pick; settle: the wait for the step's first submission and the last step's second where the exchange overlaps
+the step's end, or in the exchange where the rows go through host memory):
 
     mpiexec -n 4 python benchmarks/exchange_calls.py --count 33554432 --steps 30 --warmup 100 --out /tmp/calls.json
 """

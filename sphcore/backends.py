@@ -184,10 +184,11 @@ class NumbaBackend:
         self._launch = [(self._launcher(s.name), self._groups(s), stage_params(self.params, s),
                          [self.state[k] for k in STAGES[s.name][2]], s.when) for s in self.stages]
 
-    def resize(self, params):
+    def resize(self, params, ahead=False):
         """Hold `params`' count of particles in place: each SIZED buffer is a view of the first rows of an array
         as long as the most particles held so far (grown to HEADROOM times the count where the count exceeds
-        it, its rows copied); the rows up to the old count keep their values. The mirrors see arrays of the count."""
+        it, its rows copied); the rows up to the old count keep their values. The mirrors see arrays of the count.
+        (`ahead`: Vulkan's.)"""
         for name, shape in sized_shapes(params, self.spec).items():
             whole = self.store.get(name, self.state[name])
             if len(whole) < shape[0]:
@@ -303,8 +304,8 @@ class NumbaBackend:
         launch(self._launch_groups(self._groups(stage), stage.when), self.local_size,
                stage_params(self.params, stage), *(self.state[k] for k in STAGES[stage.name][2]))
 
-    def settle(self):
-        """(Vulkan's: wait for a submission left running; here none is.)"""
+    def settle(self, keep=0):
+        """(Vulkan's: wait for the submissions left running; here none is.)"""
 
     def run_stages(self, stages, writes=None, wait=True):
         """`stages` in order, as run_stage runs each; with `writes` ((parts, move): write_parts') first. (`wait`:
@@ -401,6 +402,7 @@ class VulkanBackend:
             self.buffers[name].write(np.asarray(state[name], self.dtypes[name]))
         self.params_buffer = self.ctx.buffer(UNIFORM_BYTES, "params", uniform=True)  # (params.glsl: Params)
         self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
+        self.params_next = self._params_copy = None  # (resize's with `ahead`: made at the first)
         self.local_size, self.spec, self.spec_values = local_size, spec, spec.values()
         self.pipelines = {}
         self.words = {}  # (bind_words' buffers, bound in place of "received" and "sent")
@@ -489,12 +491,13 @@ class VulkanBackend:
 
     def _submit(self, rec, writes=None, wait=True):
         """Run recording `rec`; with `writes` ((parts, move): write_parts') first, in the same submission; `wait`
-        False (no writes, no timer): left running (Context.submit)."""
+        False (no timer): left running (Context.submit; one that writes from host memory is waited for)."""
         self._known.clear()
+        wait = wait or rec.timer is not None
         if writes is None:
-            self.ctx.submit(rec, wait=wait or rec.timer is not None)
+            self.ctx.submit(rec, wait=wait)
         else:
-            self.ctx.write_parts(*self._copied(*writes), then=rec)
+            self.ctx.write_parts(*self._copied(*writes), then=rec, wait=wait)
         if rec.timer is not None:
             for stage, seconds in zip(rec.stages, rec.timer.seconds()):
                 self.profile.add(profile_name(stage), seconds)
@@ -574,19 +577,23 @@ class VulkanBackend:
             self._pipeline(stage.name)
         self._submit(self._recording(1, stages, timed=self.profile is not None), writes, wait)
 
-    def settle(self):
-        """Wait for the submission run_stages left running (wait=False), if any."""
-        self.ctx.settle()
+    def settle(self, keep=0):
+        """Wait for the submissions run_stages left running (wait=False), all but the last `keep` of them."""
+        self.ctx.settle(keep)
 
-    def resize(self, params):
+    def resize(self, params, ahead=False):
         """Hold `params`' count of particles in place: the buffers keep their size while the count fits (the
         shaders stop at P.n), else grow to HEADROOM times the count, their contents copied (the pipelines'
-        descriptor sets are rebound to the new ones). The uniform gets the new params. The recordings dispatch
+        descriptor sets are rebound to the new ones). The uniform gets the new params; with `ahead`, where no
+        buffer grows, in the next submission's first commands (queue_first), behind the submission left running,
+        which reads it (a rank of sphcore.parallel queues its next step behind its last). The recordings dispatch
         the buffers' capacity (`rows`), so only a growth frees them (the next steps record anew: a recording of
         one step's stages is a few milliseconds of Python)."""
-        shapes = sized_shapes(params, self.spec)  # (the device is idle: every submission is waited for)
+        shapes = sized_shapes(params, self.spec)
         grown = [name for name, shape in shapes.items()
                  if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
+        if grown:
+            self.ctx.settle()  # (the old buffers are copied: as the device left them)
         for name in grown:  # (zeroed first, as numba's: a row a rank writes in part, a halo's, holds no garbage
             old = self.buffers[name]  # that the sort, which leaves some buffers in place, could hand an owned row)
             self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
@@ -605,7 +612,21 @@ class VulkanBackend:
             self._free_recordings()
         self.shapes.update(shapes)
         self.params = params
-        self.params_buffer.write(params.view(np.uint8)[:UNIFORM_BYTES])
+        block = params.view(np.uint8)[:UNIFORM_BYTES]
+        if ahead and not grown:
+            if self._params_copy is None:
+                self.params_next = self.ctx.buffer(UNIFORM_BYTES, "params_next", mapped=True)
+                self._params_copy = self.ctx.record()
+                self._params_copy.after_earlier()
+                self._params_copy.copy(self.params_next, self.params_buffer, UNIFORM_BYTES)
+                self._params_copy.end()
+            self.params_next.write(block, settle=False)
+            if self._params_copy not in self.ctx.first:
+                self.ctx.queue_first(self._params_copy)
+        else:
+            self.params_buffer.write(block)
+            if self._params_copy is not None:  # (a copy still queued copies these)
+                self.params_next.write(block)
         self._known = {}
 
     @property
@@ -780,6 +801,9 @@ class VulkanBackend:
         for b in self.buffers.values():
             b.free()
         self.params_buffer.free()
+        if self._params_copy is not None:
+            self._params_copy.free()
+            self.params_next.free()
         self.ctx.close()
 
 

@@ -21,7 +21,9 @@ a rank holds them in. A step:
       (Allreduce) go into its first partial, so every rank's choose_dt takes the same dt, the minimum over the ranks.
       At a fixed dt (Rank.overlap) the exchange overlaps the step's end: the forces on the rows the pick reads first,
       the pick (each row as integrate will store it: integrate_row.glsl) and pack_rows; then, left running while the
-      host exchanges those rows ([1]-[2] of the next step), the forces on the other rows and integrate.
+      host exchanges those rows ([1]-[2] of the next step), the forces on the other rows and integrate. Where the
+      rows go from GPU to GPU, the next step's two submissions queue behind that one (the parameter block copied on
+      the device first: VulkanBackend.resize's `ahead`), so the device runs step after step with no wait between.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
@@ -322,8 +324,8 @@ class Rank:
         """One step of the decomposed run ([1]-[4] of the module docstring); the seconds of each part add up in
         `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the new halo's copies listed),
         stages ([4], the new halo written first in the same submission, the pick of the rows the next step's
-        exchange sends: none on one rank; where the exchange overlaps the step's end, the wait for its second
-        submission in the exchange too), dt (the partials read back and their Allreduce)."""
+        exchange sends: none on one rank; where the exchange overlaps the step's end, the wait for the last step's
+        second submission too), dt (the partials read back and their Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
             if self.sim.gauges.since >= self.sim.gauges.slots(self.layers).min():
@@ -349,11 +351,12 @@ class Rank:
             if outbox is not None:
                 backend.bind_words("sent", outbox.buffer)
             pack = [Stage("pack_rows")] if outbox is not None else []
-            backend.run_stages(place + self.band + [Stage("pick_rows", BEFORE_INTEGRATE)] + pack, writes)
+            # both submissions queued behind the last step's second (ahead), waited for up to the first
+            backend.run_stages(place + self.band + [Stage("pick_rows", BEFORE_INTEGRATE)] + pack, writes, wait=False)
+            backend.run_stages(self.inside, wait=False)  # (waited for in the next step, or as the device is read)
+            backend.settle(keep=1)
         else:
             backend.run_stages(place + self.before_dt + pick, writes)
-        if self.overlap:
-            backend.run_stages(self.inside, wait=False)  # (waited for in the next exchange, or as the device is read)
         self.starts = np.append(backend.read_mapped("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
         self.picked = backend.read_mapped("pick_count", 0, 2 * len(self.entries))
         if self.overlap and outbox is not None:  # (the rows published while the second submission runs)
@@ -444,15 +447,16 @@ class Rank:
             backend.write_mapped("place_table", 0, self.place_table(received_rows, sources, first, end))
             backend.bind_words("received", self.peers.inbox.buffer)
         start = self.lap("write", start)
-        backend.settle()
-        waited, start = time.perf_counter() - start, time.perf_counter()
-        self.seconds["stages"] += waited  # (the step's: step times the exchange as a whole, this wait out of it)
-        self.seconds["exchange"] -= waited
+        if not placed:  # (else the next step's submissions queue behind the second: ahead)
+            backend.settle()
+            waited, start = time.perf_counter() - start, time.perf_counter()
+            self.seconds["stages"] += waited  # (the step's: step times the exchange as a whole, this wait out of it)
+            self.seconds["exchange"] -= waited
         # a resize only where the count or the slab changed, or to have reused lists built (the rows moved and
         # written are listed by row: the buffers keep the rows past a smaller count)
         cells = (P["owned_first"], P["owned_end"], P["cells_first"], P["cells_end"])
         if n != self.sim.n or cells != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
-            self.sim.resize(n, self.owned_cells())
+            self.sim.resize(n, self.owned_cells(), ahead=placed)
         if placed:
             self.lap("write", start)
             return ([], move), [Stage("place_rows")]

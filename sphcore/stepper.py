@@ -333,11 +333,11 @@ class Simulation:
         self.backend.load(params, {name: particles[name] for name in LOADED}, kept)
 
     @_exclusive
-    def resize(self, n, owned_cells=(0, 0)):
+    def resize(self, n, owned_cells=(0, 0), ahead=False):
         """Hold n particles from now on, the rows up to the old count as they are (a rank of sphcore.parallel
         writes the rows that change: backend.write_rows); `owned_cells` as load's. The next step builds its
-        neighbour lists."""
-        self.backend.resize(self._count(n, owned_cells))
+        neighbour lists. (`ahead`: the backend's resize's.)"""
+        self.backend.resize(self._count(n, owned_cells), ahead)
 
     def params_of(self, n, owned_cells=(0, 0)):
         """The parameter block of n particles (the fluid's first) and `owned_cells` (load's): the bytes of the scene's
@@ -357,9 +357,7 @@ class Simulation:
         lists (those of the set held before are of other rows)."""
         params = self.params_of(n, owned_cells)
         self.params, self.n, self._carried = params, n, None
-        control = self.backend.read_buffer("control")
-        control[CONTROL_REBUILD] = 1
-        self.backend.write_buffer("control", control)
+        self.backend.write_mapped("control", CONTROL_REBUILD, [1])  # (while a submission left running goes on)
         return params
 
     @_exclusive

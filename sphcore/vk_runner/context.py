@@ -330,6 +330,25 @@ class Recording:
         vk.vkCmdPipelineBarrier(self.command_buffer, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, stages,
                                 0, 1, [barrier], 0, None, 0, None)
 
+    def after_earlier(self):
+        """Have every later command wait for every earlier one (of earlier submissions too: a barrier's scope is the
+        submission order), their shader and copy writes visible to it; a submission's first commands, behind one
+        left running."""
+        vk = self.ctx.vk
+        stages = vk.VK_PIPELINE_STAGE_TRANSFER_BIT | vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT
+        barrier = vk.VkMemoryBarrier(
+            sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+            srcAccessMask=vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_TRANSFER_WRITE_BIT,
+            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_UNIFORM_READ_BIT
+            | vk.VK_ACCESS_TRANSFER_READ_BIT | vk.VK_ACCESS_TRANSFER_WRITE_BIT)
+        vk.vkCmdPipelineBarrier(self.command_buffer, stages, stages, 0, 1, [barrier], 0, None, 0, None)
+
+    def copy(self, src, dst, nbytes):
+        """Copy the first `nbytes` of Buffer `src` into Buffer `dst`, visible to every later shader and copy."""
+        vk = self.ctx.vk
+        vk.vkCmdCopyBuffer(self.command_buffer, src.buffer, dst.buffer, 1, [vk.VkBufferCopy(0, 0, nbytes)])
+        self.copies_barrier()
+
     def copies_barrier(self):
         """Make every copy so far visible to every later shader and copy (the commands of later command buffers of
         the submission too: a barrier's scope is the submission order)."""
@@ -337,8 +356,8 @@ class Recording:
         transfer, compute = vk.VK_PIPELINE_STAGE_TRANSFER_BIT, vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT
         barrier = vk.VkMemoryBarrier(
             sType=vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER, srcAccessMask=vk.VK_ACCESS_TRANSFER_WRITE_BIT,
-            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_TRANSFER_READ_BIT
-            | vk.VK_ACCESS_TRANSFER_WRITE_BIT)
+            dstAccessMask=vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_UNIFORM_READ_BIT
+            | vk.VK_ACCESS_TRANSFER_READ_BIT | vk.VK_ACCESS_TRANSFER_WRITE_BIT)
         vk.vkCmdPipelineBarrier(self.command_buffer, transfer, transfer | compute, 0, 1, [barrier], 0, None, 0, None)
 
     def timestamp(self, timer, index):
@@ -353,8 +372,9 @@ class Recording:
         self.ctx.vk.vkEndCommandBuffer(self.command_buffer)
         return self
 
-    def free(self):
-        self.ctx.settle()
+    def free(self, settle=True):
+        if settle:
+            self.ctx.settle()
         self.ctx.vk.vkFreeCommandBuffers(self.ctx.device, self.ctx.command_pool, 1, [self.command_buffer])
 
 
@@ -471,9 +491,10 @@ class Context:
         self.command_pool = vk.vkCreateCommandPool(self.device, vk.VkCommandPoolCreateInfo(
             sType=vk.VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO, queueFamilyIndex=self.queue_family,
             flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT), None)
-        self.fence, self.running_fence = (vk.vkCreateFence(self.device, vk.VkFenceCreateInfo(
-            sType=vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None) for _ in range(2))
-        self.running = False  # (a submission left running: submit's wait=False)
+        self.fence = self._new_fence()
+        self.running = []  # (the submissions left running, oldest first: submit's wait=False; their fences, and the
+        self.fences = []  # recordings to free once each is done) and the fences free for more
+        self.first = []  # (recordings the next submission runs before its own: queue_first)
         self._kept_staging = {}  # (_staging: a buffer kept for each use)
 
     # ---- instance and device ----
@@ -697,13 +718,15 @@ class Context:
         """Copy (source offset, destination offset, bytes) `regions` from buffer `src` to `dst`, and wait."""
         self._copies([(src, dst, regions)])
 
-    def _copies(self, copies, then=None):
-        """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait; with
-        `then` (a finished Recording), it runs after the copies in the same submission, their writes visible to it."""
+    def _copies(self, copies, then=None, wait=True):
+        """Run the buffer copies `copies` ((src, dst, regions) each, as _copy's) in one submission, and wait (`wait`
+        False: submit's); with `then` (a finished Recording), it runs after the copies in the same submission, their
+        writes visible to it."""
         grouped = {}  # (one command a pair of buffers: a command took 7 us of Python)
         for src, dst, regions in copies:
             grouped.setdefault((src, dst), []).extend(regions)
         rec = Recording(self)
+        rec.after_earlier()  # (behind a submission left running)
         for (src, dst), regions in grouped.items():
             # (the regions written through numpy: a VkBufferCopy made one by one took 7 us of Python, 2 ms for the
             # 300 regions a rank of sphcore.parallel once read every step)
@@ -712,8 +735,9 @@ class Context:
             self.vk.vkCmdCopyBuffer(rec.command_buffer, src, dst, len(regions), array)
         if then is not None:
             rec.copies_barrier()
-        self.submit(rec.end(), *([then] if then is not None else []))
-        rec.free()
+        self.submit(rec.end(), *([then] if then is not None else []), wait=wait, keep=() if wait else [rec])
+        if wait:
+            rec.free()
 
     # ---- public ----
     def read_regions(self, copies, nbytes, into=None):
@@ -735,10 +759,11 @@ class Context:
         space_to_write's)."""
         self.write_parts([(data, copies)])
 
-    def write_parts(self, parts, copies_first=(), then=None):
+    def write_parts(self, parts, copies_first=(), then=None, wait=True):
         """write_regions of each (data, copies) of `parts`, in one submission: each `data` a Buffer, or one host
         array (uint8) for them all; with the buffer copies `copies_first` (_copies') where given, of bytes the
-        writes do not touch; and `then` (a finished Recording) after them in that submission (_copies)."""
+        writes do not touch; and `then` (a finished Recording) after them in that submission (_copies; `wait`:
+        submit's, where no part is host memory)."""
         commands, staged = list(copies_first), None
         for data, copies in parts:
             copies = [c for c in copies if c[3]]
@@ -755,10 +780,10 @@ class Context:
                     raise ValueError("write_parts takes one host array for all its parts (else Buffers)")
                 source = staged[1]
             commands += [(source.buffer, buffer.buffer, [(at, offset, count)]) for buffer, at, offset, count in copies]
-        if commands:
-            self._copies(commands, then)
+        if commands:  # (one that reads the kept staging buffer waited for: space_to_write hands it out again)
+            self._copies(commands, then, wait or staged is not None)
         elif then is not None:
-            self.submit(then)
+            self.submit(then, wait=wait)
 
     def buffer(self, nbytes, name="buffer", uniform=False, mapped=False):
         return Buffer(self, nbytes, name, uniform, mapped)
@@ -772,14 +797,15 @@ class Context:
     def timer(self, slots):
         return Timer(self, slots)
 
-    def submit(self, *recordings, wait=True):
-        """Run finished recordings, in order, in one submission and wait for it; with `wait` False, leave it running
-        (one at a time): every later call that reads or writes the device's memory from the host, updates a
-        descriptor set or frees what it may use waits for it first (settle). A later submission runs after it."""
+    def submit(self, *recordings, wait=True, keep=()):
+        """Run finished recordings, in order, in one submission (queue_first's first) and wait for it; with `wait`
+        False, leave it running (the recordings of `keep` freed once it is done): every later call that reads or
+        writes the device's memory from the host, updates a descriptor set or frees what it may use waits for it
+        first (settle). A later submission runs after it (each recording ends with a barrier; queue_first's begins
+        with one)."""
         vk = self.vk
-        if not wait:
-            self.settle()  # (one left running at a time)
-        fence = self.fence if wait else self.running_fence
+        recordings, self.first = self.first + list(recordings), []
+        fence = self.fence if wait else self.fences.pop() if self.fences else self._new_fence()
         try:
             vk.vkQueueSubmit(self.queue, 1, [vk.VkSubmitInfo(
                 sType=vk.VK_STRUCTURE_TYPE_SUBMIT_INFO, commandBufferCount=len(recordings),
@@ -789,13 +815,24 @@ class Context:
         if wait:
             self._wait(self.fence)
         else:
-            self.running = True
+            self.running.append((fence, keep))
 
-    def settle(self):
-        """Wait for the submission left running (submit's wait=False), if any."""
-        if self.running:
-            self.running = False
-            self._wait(self.running_fence)
+    def queue_first(self, recording):
+        """Have the next submission run `recording` (a finished one, kept by the caller) before its own."""
+        self.first.append(recording)
+
+    def settle(self, keep=0):
+        """Wait for the submissions left running (submit's wait=False), all but the last `keep` of them."""
+        while len(self.running) > keep:
+            fence, recordings = self.running.pop(0)
+            self._wait(fence)
+            self.fences.append(fence)
+            for recording in recordings:
+                recording.free(settle=False)
+
+    def _new_fence(self):
+        return self.vk.vkCreateFence(self.device, self.vk.VkFenceCreateInfo(
+            sType=self.vk.VK_STRUCTURE_TYPE_FENCE_CREATE_INFO), None)
 
     def _wait(self, fence):
         """Wait for `fence` (polled a while first on a GPU: a short submission is known done sooner), and reset it."""
@@ -835,7 +872,7 @@ class Context:
             pass  # nothing runs on a lost device any more; its objects are destroyed all the same
         for staging in self._kept_staging.values():
             staging.free()
-        for fence in (self.fence, self.running_fence):
+        for fence in [self.fence, *self.fences, *(fence for fence, _ in self.running)]:
             vk.vkDestroyFence(self.device, fence, None)
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
