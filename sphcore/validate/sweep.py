@@ -523,8 +523,9 @@ def run_sweep(out, points=None, scheduler=None, workers=None, quick=False, backe
         raise SweepError("--workers sizes the local cluster; with --scheduler the scheduler's workers run the points")
     # a Ctrl-C stops the local workers with a semaphore unreleased, which multiprocessing's resource tracker (a process
     # started later, with this environment) cleans up at the end with a warning under the one line: filtered there
-    quiet = "ignore:resource_tracker:UserWarning"
-    os.environ["PYTHONWARNINGS"] = ",".join(w for w in (os.environ.get("PYTHONWARNINGS"), quiet) if w)
+    quiet, filters = "ignore:resource_tracker:UserWarning", os.environ.get("PYTHONWARNINGS", "")
+    if quiet not in filters.split(","):  # (once: a process may run several sweeps)
+        os.environ["PYTHONWARNINGS"] = ",".join(w for w in (filters, quiet) if w)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     previous, earlier = read_table(out)
