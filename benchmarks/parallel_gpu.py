@@ -4,8 +4,8 @@
     mpiexec -n 2 python benchmarks/parallel_gpu.py --count 8388608 --out benchmarks/results/parallel_gpu.json
     mpiexec -n 2 python benchmarks/parallel_gpu.py --count 2097152 --per-rank ...   # weak scaling: 2 M a rank
 
-The scene is steps_per_second.py's 3D dam break (Tait, h = 2 dx, fixed dt, a sort every step; its block's
-lattice: the count rounded up to a cube), cut in slabs along z. Rank r runs on its host's r-th GPU
+The scene is steps_per_second.py's 3D dam break (Tait, h = 2 dx, fixed dt or --dt's, a sort every step; its
+block's lattice: the count rounded up to a cube), cut in slabs along z. Rank r runs on its host's r-th GPU
 (parallel.rank_device; --device overrides). After --warmup steps (shader builds, first recordings), --steps steps
 are timed; each rank's step is split as Rank.seconds splits it: exchange (the cuts' Allreduce, the halo's and the
 migrants' rows read back, the Alltoallv, the new halo written: what crosses the host),
@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import sphcore  # noqa: E402
 from sphcore import parallel  # noqa: E402
-from steps_per_second import append_line, make_case  # noqa: E402
+from steps_per_second import append_line, case_config  # noqa: E402
 
 PARTS = parallel.PARTS
 HOST = ("exchange",)  # the part that moves rows between ranks (the next four are its parts; host_staged_*: its
@@ -49,6 +49,7 @@ def main():
                     "under params.MAX_CELLS)")
     ap.add_argument("--profile", action="store_true", help="then --steps more steps with every stage timed (Vulkan: GPU "
                     "timestamps; the exchange's pick_rows too), each rank's stages in the JSON line (profile)")
+    ap.add_argument("--dt", help='time.dt: seconds, "auto" or "adaptive" (default: the case\'s fixed 5e-5 s)')
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
     comm = MPI.COMM_WORLD
@@ -56,7 +57,10 @@ def main():
     count = args.count * size if args.per_rank else args.count
     if args.shape:
         count = args.shape[0] * args.shape[1] * args.shape[2]
-    scene, _ = make_case(count, dim=3, search="grid", room=args.room, shape=args.shape)
+    config = case_config(count, dim=3, search="grid", room=args.room, shape=args.shape)
+    if args.dt:
+        config["time"]["dt"] = args.dt if args.dt in ("auto", "adaptive") else float(args.dt)
+    scene = sphcore.Scene.from_dict(config)
     options = {}
     if args.backend == "vulkan":
         options["device"] = args.device or parallel.rank_device(comm.Split_type(MPI.COMM_TYPE_SHARED).Get_rank())
@@ -96,6 +100,7 @@ def main():
     ms = 1e3 * seconds / args.steps
     slowest = {p: max(r[f"{p}_ms"] for r in rows) for p in PARTS}
     result = {"ranks": size, "scaling": "weak" if args.per_rank else "strong", "particles": n,
+              "dt": config["time"]["dt"],
               "particles_per_rank": n / size, "backend": args.backend, "steps": args.steps, "ms_per_step": ms,
               "host_staged_ms": sum(slowest[p] for p in HOST), "host_staged_share": sum(slowest[p] for p in HOST) / ms,
               **{f"{p}_ms_slowest": slowest[p] for p in PARTS}, "setup_seconds": setup, "per_rank": rows,

@@ -5,6 +5,8 @@
 # $PER_GPU particles a GPU (default 2097152); $SHAPE ("NX NY NZ"): the strong case's block a lattice of those
 # particles along x, y and z in place of a cube. Then benchmarks/plot_parallel_gpu.py draws $OUT/parallel_gpu.png.
 # PROFILE=1: then as many steps again with every stage timed, each rank's stages in the JSON line.
+# DT: the scene's time.dt (default its fixed 5e-5 s; adaptive: the dt over the ranks every step, as the engineering
+# model's).
 # SPHCORE_MPI_EXCHANGE (cuda, host, alltoallv; unset: the first every rank can) goes to every rank.
 # Each case's GPU clocks and load, every 200 ms, go to $OUT/<case>_gpus.csv (nvidia-smi).
 # Results: $OUT/parallel_gpu.json (a JSON line a case; default benchmarks/results/parallel_gpu), logs beside it.
@@ -40,7 +42,7 @@ for scaling in ${SCALING:-strong weak}; do
             --mca btl_vader_single_copy_mechanism cma \
             -x PYTHONPATH -x VK_DRIVER_FILES -x PYTHONUNBUFFERED -x SPHCORE_CACHE_DIR -x SPHCORE_MPI_EXCHANGE \
             bash -c 'CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-$OMPI_COMM_WORLD_LOCAL_RANK} exec "$0" "$@"' \
-            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --warmup "${WARMUP:-100}" --room "${ROOM:-2}" ${PROFILE:+--profile} --out "$OUT/parallel_gpu.json" > "$log" 2>&1
+            "$PY" benchmarks/parallel_gpu.py $args --steps "${STEPS:-20}" --warmup "${WARMUP:-100}" --room "${ROOM:-2}" ${PROFILE:+--profile} ${DT:+--dt $DT} --out "$OUT/parallel_gpu.json" > "$log" 2>&1
         echo "$scaling $ranks rc=$? $(tail -c 400 "$log")"
         kill $clocks
     done

@@ -33,9 +33,10 @@ from sphcore.workgroups import group_count
 NAMES = list(BUFFERS)  # binding number = index
 SIZED = ("particles", "neighbours", "gradients")  # BUFFERS' lengths that follow the particle count
 HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this many times the count
-# Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), in
-# memory the host maps where the device has it (host-visible device memory: no submission to write or read them)
-MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table")
+# Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), and
+# dt_partial, whose first row it reads and writes (Rank.reduce_dt), in memory the host maps where the device has it
+# (host-visible device memory: no submission to write or read them)
+MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table", "dt_partial")
 # read_regions packs each region from a multiple of PACK_GRAIN bytes: an H100 copied 40 runs of 1.1 MB in 194 us where
 # each run's bytes were a multiple of 16, in 520 us where they were one of 4 (benchmarks/copy_regions.py)
 PACK_GRAIN = 16

@@ -17,13 +17,15 @@ a rank holds them in. A step:
       (nothing pickled, nothing picked on the host);
   [3] the received ones written over the old halo's rows, in the submission of [4];
   [4] the plan's stages (on Vulkan in one submission, two with an adaptive dt), then pick_rows for the next
-      exchange: reduce_dt takes the rank's slab's rows alone, and the largest |v|^2 and |a|^2 over the ranks
-      (Allreduce) go into its first partial, so every rank's choose_dt takes the same dt, the minimum over the ranks.
-      At a fixed dt (Rank.overlap) the exchange overlaps the step's end: the forces on the rows the pick reads first,
-      the pick (each row as integrate will store it: integrate_row.glsl) and pack_rows; then, left running while the
-      host exchanges those rows ([1]-[2] of the next step), the forces on the other rows and integrate. Where the
-      rows go from GPU to GPU, the next step's two submissions queue behind that one (the parameter block copied on
-      the device first: VulkanBackend.resize's `ahead`), so the device runs step after step with no wait between.
+      exchange: reduce_dt takes the rank's slab's rows alone, choose_dt at level LARGEST writes the largest |v|^2
+      and |a|^2 as its first partial, and the largest over the ranks (Allreduce) goes there, so every rank's
+      choose_dt takes the same dt, the minimum over the ranks. Where the exchange overlaps the step's end
+      (Rank.overlap) the pick (each row as integrate will store it: integrate_row.glsl) and pack_rows come first,
+      at a fixed dt after the forces on the rows the pick reads, with an adaptive dt after choose_dt; then, left
+      running while the host exchanges those rows ([1]-[2] of the next step), the forces on the other rows and
+      integrate, or integrate alone. Where the rows go from GPU to GPU, the next step's submissions queue behind
+      that one (the parameter block copied on the device first: VulkanBackend.resize's `ahead`), so at a fixed dt
+      the device runs step after step with no wait between.
 Snapshots are ParaView's parallel files: each rank writes its owned particles as one .vtp piece, rank 0 the
 .pvtp naming the pieces, listed in the .pvd. The checkpoint and final.npz are gathered on rank 0's host in
 particle-id order, checked and written there as a 1-rank run writes them (no device holds more than its share);
@@ -139,6 +141,8 @@ PACKED = {"particle_x": "scratch_x", "particle_v": "scratch_v", "particle_rho": 
 # The levels (Stage) of a step whose exchange overlaps its end (Rank.overlap): compute_forces' on the rows the pick
 # reads, then on the others; pick_rows' before integrate, each row as integrate will store it.
 PICKED_ROWS, OTHER_ROWS, BEFORE_INTEGRATE = 1, 2, 1
+# choose_dt's level that writes the largest of a rank's partials as the first (Rank.reduce_dt)
+LARGEST = 1
 
 
 def sent_buffers(spec):
@@ -254,18 +258,24 @@ class Rank:
         self.sim, self.comm, self.rank, self.size = sim, comm, comm.Get_rank(), comm.Get_size()
         names = [stage.name for stage in sim.stages]
         cut = names.index("reduce_dt") if "reduce_dt" in names else len(names)
-        self.before_dt, self.after_dt = sim.stages[:cut + 1], sim.stages[cut + 1:]  # (the dt: over the ranks)
         self.adaptive = cut < len(names)
-        # [4] in two submissions where the step's end is the forces, the gauges, choose_dt and integrate, at a fixed
-        # dt, with no shifting (whose sums are in the pick's scratch_v) and no reused lists: the forces on the rows
-        # the pick reads, the pick (each row as integrate will store it) and the pack; then the other rows' forces and
-        # the rest, left running while the exchange sends the picked rows (overlap)
+        # (the dt over the ranks: choose_dt's largest of the rank's partials, the host's over the ranks, then the dt)
+        self.before_dt = sim.stages[:cut + 1] + ([Stage("choose_dt", LARGEST)] if self.adaptive else [])
+        self.after_dt = sim.stages[cut + 1:]
+        # [4] the step's end in two submissions where it is the forces, the gauges, the dt and integrate, with no
+        # shifting (whose sums are in the pick's scratch_v) and no reused lists: the pick (each row as integrate will
+        # store it) and the pack, then the rest, left running while the exchange sends the picked rows (overlap). At
+        # a fixed dt the first takes the forces on the rows the pick reads (band), the second the other rows' and the
+        # rest (inside); with an adaptive dt the first takes choose_dt (after the forces and the dt over the ranks),
+        # the second integrate alone
         spec, forces = sim.scene.spec, names.index("compute_forces") if "compute_forces" in names else len(names)
-        self.overlap = (self.size > 1 and not self.adaptive and not spec.SHIFTING and not spec.LIST_SKIN
-                        and names[-1:] == ["integrate"]
-                        and set(names[forces + 1:]) <= {"sample_gauges", "choose_dt", "integrate"})
-        self.band = sim.stages[:forces] + [Stage("compute_forces", PICKED_ROWS)]
-        self.inside = [Stage("compute_forces", OTHER_ROWS)] + sim.stages[forces + 1:]
+        self.overlap = (self.size > 1 and not spec.SHIFTING and not spec.LIST_SKIN and names[-1:] == ["integrate"]
+                        and set(names[forces + 1:]) <= {"sample_gauges", "reduce_dt", "choose_dt", "integrate"})
+        if self.adaptive:
+            self.band, self.inside = self.after_dt[:-1], self.after_dt[-1:]
+        else:
+            self.band = sim.stages[:forces] + [Stage("compute_forces", PICKED_ROWS)]
+            self.inside = [Stage("compute_forces", OTHER_ROWS)] + sim.stages[forces + 1:]
         self.published = None  # (the outbox the step's pack wrote and published from: the exchange then packs none)
         self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
         self.slabs = Slabs(sim.scene, sim.params)
@@ -340,13 +350,14 @@ class Rank:
         start = self.lap("exchange", start)
         backend, self.published = self.sim.backend, None
         pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
-        if self.adaptive:  # [4]
+        stages = self.before_dt  # [4]
+        if self.adaptive:  # (up to the dt, waited for, the last step's second too; then the dt over the ranks)
             backend.run_stages(place + self.before_dt, writes)
             start = self.lap("stages", start)
             self.reduce_dt(MPI)
             start = self.lap("dt", start)
-            backend.run_stages(self.after_dt + pick)
-        elif self.overlap:
+            place, writes, stages = [], None, self.after_dt
+        if self.overlap:
             outbox = self.peers.outbox if self.peers else None
             if outbox is not None:
                 backend.bind_words("sent", outbox.buffer)
@@ -356,7 +367,7 @@ class Rank:
             backend.run_stages(self.inside, wait=False)  # (waited for in the next step, or as the device is read)
             backend.settle(keep=1)
         else:
-            backend.run_stages(place + self.before_dt + pick, writes)
+            backend.run_stages(place + stages + pick, writes)
         self.starts = np.append(backend.read_mapped("layer_start", 0, self.layers), self.sim.n).astype(np.int64)
         self.picked = backend.read_mapped("pick_count", 0, 2 * len(self.entries))
         if self.overlap and outbox is not None:  # (the rows published while the second submission runs)
@@ -389,15 +400,14 @@ class Rank:
         return now
 
     def reduce_dt(self, MPI):
-        """The dt over every rank's owned particles: reduce_dt's partials (of this rank's slab's rows alone) read
-        back, their largest |v|^2 and |a|^2 (a maximum is exact in any order) the largest over the ranks
-        (Allreduce), written as the first partial: choose_dt then takes the world's dt on every rank."""
+        """The dt over every rank's owned particles: the largest |v|^2 and |a|^2 of reduce_dt's partials (of this
+        rank's slab's rows alone), which choose_dt at level LARGEST wrote as the first partial, read (a buffer the
+        host maps), the largest over the ranks (Allreduce; a maximum is exact in any order) written there: choose_dt
+        then takes the world's dt on every rank."""
         backend = self.sim.backend
-        groups = -(-self.sim.n // backend.local_size)
-        partials = backend.read_rows("dt_partial", 0, groups)
-        largest = partials.max(axis=0) if groups else np.zeros(2, partials.dtype)
+        largest = backend.read_mapped("dt_partial", 0, 1)[0]
         self.comm.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
-        backend.write_rows("dt_partial", 0, largest[None])
+        backend.write_mapped("dt_partial", 0, largest[None])
 
     def exchange(self):
         """[1]-[3] after a step: the rows of this rank's slab each other rank needs (pick: those picked at the end of

@@ -440,12 +440,14 @@ def test_pack_rows_writes_what_read_regions_reads(backend, precision):
 
 
 @pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
-def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bits(backend):
-    """A rank's step whose exchange overlaps its end (Rank.overlap): compute_forces on the rows the pick reads, the
-    pick before integrate (each row as integrate will store it), then compute_forces on the other rows and the rest
-    of the step (the pick's table rewritten before them, as the next step's is: the second pass takes the rows the
-    first found) give the bits of the step in one pass with the pick after it: every buffer and every picked row
-    (Verlet at a fixed dt, with gauges; at the second step, whose last dt differs from the one before, and later)."""
+@pytest.mark.parametrize("dt", ["fixed", "adaptive"])
+def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bits(backend, dt):
+    """A rank's step whose exchange overlaps its end (Rank.overlap) gives the bits of the step in one pass with the
+    pick after it: every buffer and every picked row (Verlet with gauges; at the second step, whose last dt differs
+    from the one before, and later). At a fixed dt: compute_forces on the rows the pick reads, the pick before
+    integrate (each row as integrate will store it), then compute_forces on the other rows and the rest of the step
+    (the pick's table rewritten before them, as the next step's is: the second pass takes the rows the first found).
+    With an adaptive dt: the step up to reduce_dt, then choose_dt and the pick, then integrate."""
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
@@ -453,12 +455,19 @@ def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bit
     from sphcore.plan import PICK_ENTRIES
     from sphcore.stage import Stage
     from sphcore.stepper import LOADED
-    scene = sphcore.Scene.from_dict(gauged(fixed_dt(small_dam_break())))
+    config = gauged(small_dam_break())
+    scene = sphcore.Scene.from_dict(fixed_dt(config) if dt == "fixed" else config)
     with sphcore.Simulation(scene, backend, id_order=True) as one, \
             sphcore.Simulation(scene, backend, id_order=True) as two:
         names = [stage.name for stage in one.stages]
         forces = names.index("compute_forces")
-        assert names[forces + 1:] == ["sample_gauges", "choose_dt", "integrate"]
+        if dt == "fixed":
+            assert names[forces + 1:] == ["sample_gauges", "choose_dt", "integrate"]
+            band = two.stages[:forces] + [Stage("compute_forces", PICKED_ROWS)]
+            inside = [Stage("compute_forces", OTHER_ROWS)] + two.stages[forces + 1:]
+        else:
+            assert names[forces + 1:] == ["sample_gauges", "reduce_dt", "choose_dt", "integrate"]
+            band, inside = two.stages[:-1], two.stages[-1:]
         layers = int(one.params[0]["grid_dim"][1])
         table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
@@ -473,12 +482,11 @@ def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bit
                                      ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
                     sim.backend.write_rows(name, 0, values)
             one.backend.run_stages(one.stages + [Stage("pick_rows")])
-            two.backend.run_stages(two.stages[:forces] + [Stage("compute_forces", PICKED_ROWS),
-                                                          Stage("pick_rows", BEFORE_INTEGRATE)])
+            two.backend.run_stages(band + [Stage("pick_rows", BEFORE_INTEGRATE)])
             whole = table.copy()  # (the next step's table, written as the second pass runs: one entry, every layer)
             whole[0, 0], whole[1] = 1, (0, layers, 0, 1)
             two.backend.write_rows("pick_table", 0, whole)
-            two.backend.run_stages([Stage("compute_forces", OTHER_ROWS)] + two.stages[forces + 1:])
+            two.backend.run_stages(inside)
             two.backend.write_rows("pick_table", 0, table)
             a, b = one.backend.read(), two.backend.read()
             counts = a["pick_count"][:4].astype(np.int64)
@@ -1094,21 +1102,24 @@ print("PUBLISHED", PUBLISHED["step"], PUBLISHED["swap_peers"], flush=True)
 
 
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
-@pytest.mark.parametrize("ranks, spacing, when, backend", [
-    (3, 0.02, "after the pick", "numba"), (2, 0.0125, "at the step's end", "numba"),
-    pytest.param(2, 0.0125, "at the step's end", "vulkan", marks=pytest.mark.vulkan)])
-def test_the_path_from_gpu_to_gpu_on_host_memory_is_bitwise_one_rank(tmp_path, ranks, spacing, when, backend):
+@pytest.mark.parametrize("ranks, spacing, when, backend, dt", [
+    (3, 0.02, "after the pick", "numba", "fixed"), (2, 0.0125, "at the step's end", "numba", "fixed"),
+    pytest.param(2, 0.0125, "at the step's end", "vulkan", "fixed", marks=pytest.mark.vulkan),
+    pytest.param(2, 0.0125, "at the step's end", "vulkan", "adaptive", marks=pytest.mark.vulkan)])
+def test_the_path_from_gpu_to_gpu_on_host_memory_is_bitwise_one_rank(tmp_path, ranks, spacing, when, backend, dt):
     """The exchange from GPU to GPU (pack_rows into the outbox, the peers' publish and pull, place_rows from the
-    inbox: what CI has no GPU for), its CUDA calls done on host memory, at a fixed dt (the exchange overlapping the
-    step's end): a dam break ends bitwise where the 1-rank driver does on numba. On 3 ranks (one inside, its rows
-    from two senders) the slabs are too thin for the pick's zones, so each step's rows are picked again and published
-    after the exchange's pick; on 2 ranks at a finer spacing they fit, and are published at the step's end. On
-    Vulkan (lavapipe), each step's submissions queued behind the last step's second (Rank.step), with the new
-    parameter block and the rows moved in their first commands."""
+    inbox: what CI has no GPU for), its CUDA calls done on host memory, the exchange overlapping the step's end: a
+    dam break ends bitwise where the 1-rank driver does on numba. On 3 ranks (one inside, its rows from two senders)
+    the slabs are too thin for the pick's zones, so each step's rows are picked again and published after the
+    exchange's pick; on 2 ranks at a finer spacing they fit, and are published at the step's end. On Vulkan
+    (lavapipe), each step's submissions queued behind the last step's second (Rank.step), with the new parameter
+    block and the rows moved in their first commands; at a fixed dt, and with an adaptive dt (the engineering
+    model's: integrate alone left running)."""
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
-    config = fixed_dt(small_dam_break(steps=150))
+    config = small_dam_break(steps=150)
+    config = fixed_dt(config) if dt == "fixed" else config
     config["fluid"] = {**config["fluid"], "spacing": spacing}
     scene_file = tmp_path / "dam.toml"
     scene_file.write_text(toml(config))

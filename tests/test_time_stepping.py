@@ -115,6 +115,31 @@ def test_adaptive_dt_reacts_to_a_fast_particle_within_one_step(open_backend, bac
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+def test_a_ranks_choose_dt_writes_the_largest_partial_first(open_backend, backend):
+    """On a rank (sphcore.parallel: Rank.reduce_dt), choose_dt at level 1 writes the largest |v|^2 and |a|^2 of
+    reduce_dt's partials as the first partial: numpy's maximum of the partials, bitwise (work groups of 8: 47
+    partials, the fast particle's in the last); the other partials and the time stay as they were."""
+    from sphcore.stage import Stage
+    scene = scene_of(COLUMN, MODELS)
+    state, params, stages, spec = scene_state(scene)
+    top = int(np.argmax(state["particle_x"][:, 0] + state["particle_x"][:, 1]))  # sorted last: the last partial
+    state["particle_v"][top, :2] = [0.0, 50.0]
+    sim = open_backend(backend, params, state, stages, spec, local_size=8)
+    names = [stage.name for stage in stages]
+    for stage in stages[:names.index("reduce_dt") + 1]:
+        sim.run_stage(stage)
+    before = sim.read()
+    sim.run_stage(Stage("choose_dt", 1))
+    after = sim.read()
+    partials = before["dt_partial"][:-(-len(state["particle_x"]) // 8)]
+    assert len(partials) == 47 and partials[-1, 0] == np.float32(2500.0) and partials[0, 0] < 2500.0
+    assert np.array_equal(after["dt_partial"][0], partials.max(axis=0))
+    assert partials[:, 1].argmax() != 0 and after["dt_partial"][0, 1] > partials[0, 1]  # (|a|^2 too)
+    assert np.array_equal(after["dt_partial"][1:], before["dt_partial"][1:])
+    assert np.array_equal(after["time_state"], before["time_state"])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_momentum_is_conserved_with_the_models(open_backend, backend):
     """An isolated block (no gravity, the walls beyond h) with random velocities: artificial viscosity
     (Pi_ij symmetric, grad W antisymmetric), Verlet and the adaptive dt keep the total momentum to

@@ -8,7 +8,9 @@
 //   0.125 h^2 / nu, Morris et al. 1997), c^2 = k (Tait: 7 B / rho_0), cfl_number = 0.25 time.dt_fraction.
 //   The group's invocations share the partials (every local_size-th each) and reduce their maxima in
 //   shared memory as reduce_dt does: exact in any order. Else dt = P.dt (Verlet needs the last
-//   step's dt: 0 at the first step).
+//   step's dt: 0 at the first step). On a rank of sphcore.parallel D.level 1 runs first, after
+//   reduce_dt: it writes the group's largest |v|^2 and |a|^2 as the first partial, which the host
+//   reads (a buffer it maps), replaces by the largest over the ranks and level 0 then takes.
 // Mirror: sphcore/sph/choose_dt.py (same names, same statement order, same step labels; one local
 // loop per phase between barriers).
 #extension GL_GOOGLE_include_directive : require
@@ -18,7 +20,7 @@ layout(local_size_x_id = 0) in;
 #include "real.glsl"
 
 layout(std430, binding = 20) buffer TimeState { vec4 time_state[]; };
-layout(std430, binding = 21) readonly buffer DtPartial { real dt_partial[]; };  // (|v|^2, |a|^2) per group
+layout(std430, binding = 21) buffer DtPartial { real dt_partial[]; };  // (|v|^2, |a|^2) per group
 
 shared real s_v2[gl_WorkGroupSize.x];
 shared real s_a2[gl_WorkGroupSize.x];
@@ -48,6 +50,12 @@ void main() {
         barrier();
     }
     if (lid != 0u) return;
+    // (D.level 1, a rank's: the largest as the first partial, where the host takes the largest over the ranks)
+    if (D.level == 1u) {
+        dt_partial[0] = s_v2[0];
+        dt_partial[1] = s_a2[0];
+        return;
+    }
     float dt = P.dt;
     if (ADAPTIVE_DT) {
         // [3] the bounds: CFL on c + |v|max, force on |a|max (none where nothing accelerates), P.dt

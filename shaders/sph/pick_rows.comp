@@ -8,8 +8,8 @@
 // them back start on 16 bytes). A row whose layer (as count_cells finds it) is in that slab is the rank's from then on
 // (a migrant: what a step reads of a particle before writing it); a row within the halo's width of the slab
 // (pick_bounds: the slab widened by decomposition.halo_width) is its halo. At D.level 1 a row is taken as integrate
-// will store it (integrate_row.glsl, at the fixed dt P.dt; the last step's dt is time_state's dt, which choose_dt
-// hands over after this stage; no shifting: its sums are in scratch_v). Migrants take slots from the first zone's first
+// will store it (integrate_row.glsl; no shifting: its sums are in scratch_v): at a fixed dt P.dt, before choose_dt
+// (time_state's dt is the last step's), or with an adaptive dt after choose_dt (time_state: the step's, the last's). Migrants take slots from the first zone's first
 // on, the halo from the second's (atomic counts in pick_count: the order of a slot depends on scheduling; the
 // receiver's sort puts every cell in id order whatever its rows). The rows go into the sort's scratch buffers and
 // scratch_vh (Verlet's half-step velocity), which a step writes before it reads them; an entry whose zones end past
@@ -57,7 +57,10 @@ void main() {
         real3 stepped_x;
         real3 stepped_v;
         real3 stepped_vh;
-        integrated(i, P.dt, VERLET ? time_state[0].x : 0.0, real4(0.0), stepped_x, stepped_v, stepped_vh);
+        // (at a fixed dt before choose_dt: time_state's dt is the last step's; with an adaptive dt after it)
+        float dt = ADAPTIVE_DT ? time_state[0].x : P.dt;
+        float dt_prev = VERLET ? (ADAPTIVE_DT ? time_state[0].y : time_state[0].x) : 0.0;
+        integrated(i, dt, dt_prev, real4(0.0), stepped_x, stepped_v, stepped_vh);
         x = real4(stepped_x, 0.0);
         v = real4(stepped_v, 0.0);
         if (VERLET) vh = real4(stepped_vh, 0.0);

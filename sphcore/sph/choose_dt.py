@@ -2,6 +2,7 @@
 last step's dt, time hi, time lo). ADAPTIVE_DT: dt = min(P.dt, cfl_number h / (c + |v|max),
 cfl_number sqrt(h / |a|max)) over reduce_dt's partials, which the group's invocations share and
 reduce in shared memory; else P.dt. The time is summed in a compensated float32 pair (Kahan 1965).
+On a rank of sphcore.parallel, level 1 first writes the largest as the first partial (the shader says more).
 
 Mirror of shaders/sph/choose_dt.comp: same names, same statement order, same step labels. The
 shader's barriers split it into phases, so this mirror has its own `launch` (one group is
@@ -51,8 +52,13 @@ def choose_dt(spec, real=np.float32):
             stride *= 2
 
     @njit
-    def choose_dt_last(params, time_state, s_v2, s_a2):
+    def choose_dt_last(params, time_state, dt_partial, s_v2, s_a2):
         P = params[0]
+        # (P.level 1, a rank's: the largest as the first partial, where the host takes the largest over the ranks)
+        if P.level == 1:
+            dt_partial[0, 0] = s_v2[0]
+            dt_partial[0, 1] = s_a2[0]
+            return
         dt = P.dt
         if ADAPTIVE_DT:
             # [3] the bounds: CFL on c + |v|max, force on |a|max (none where nothing accelerates), P.dt
@@ -86,6 +92,6 @@ def choose_dt(spec, real=np.float32):
             # (barrier)
             choose_dt_tree(local_size, s_v2, s_a2)
             # invocation 0 only
-            choose_dt_last(params, time_state, s_v2, s_a2)
+            choose_dt_last(params, time_state, dt_partial, s_v2, s_a2)
 
     return cached(launch)

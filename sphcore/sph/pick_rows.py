@@ -20,7 +20,7 @@ from sphcore.workgroups import launcher
 
 @lru_cache(maxsize=None)
 def pick_rows(spec, real=np.float32):
-    DIM, VERLET, BODIES = spec.DIM, spec.VERLET, spec.BODIES
+    DIM, VERLET, BODIES, ADAPTIVE_DT = spec.DIM, spec.VERLET, spec.BODIES, spec.ADAPTIVE_DT
     cell_of = cells(spec, real).cell_of
     table = pick_table_functions(spec)
     entry_rows, zone_of, picked_row = table.entry_rows, table.zone_of, table.picked_row
@@ -40,9 +40,11 @@ def pick_rows(spec, real=np.float32):
         v_x, v_y, v_z, v_w = particle_v[i, 0], particle_v[i, 1], particle_v[i, 2], particle_v[i, 3]
         vh_x, vh_y, vh_z, vh_w = particle_vh[i, 0], particle_vh[i, 1], particle_vh[i, 2], particle_vh[i, 3]
         if P.level == 1 and not (BODIES and particle_id[i] >= P.fluid_count):
+            # (at a fixed dt before choose_dt: time_state's dt is the last step's; with an adaptive dt after it)
+            dt = time_state[0, 0] if ADAPTIVE_DT else P.dt
+            dt_prev = (time_state[0, 1] if ADAPTIVE_DT else time_state[0, 0]) if VERLET else np.float32(0.0)
             (x_x, x_y, x_z), (v_x, v_y, v_z), stepped_vh = integrated(
-                P, i, P.dt, time_state[0, 0] if VERLET else np.float32(0.0), NO_SHIFT, particle_x, particle_v,
-                particle_a, particle_vh, obstacle_box)
+                P, i, dt, dt_prev, NO_SHIFT, particle_x, particle_v, particle_a, particle_vh, obstacle_box)
             x_w = v_w = real(0.0)
             if VERLET:
                 (vh_x, vh_y, vh_z), vh_w = stepped_vh, real(0.0)
