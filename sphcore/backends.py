@@ -95,9 +95,10 @@ def check_neighbours(state, spec):
                          f"index at most {NEIGHBOUR_MASK + 1} particles and 2^32 slots in all")
 
 
-def dispatch_size(stage, params, gauges=1, rows=None):
+def dispatch_size(stage, params, gauges=1, rows=None, cells=None):
     """Invocations of `stage`: one per particle (or per row of buffers with room for `rows`: the shaders stop
-    at P.n), cell, or node of the pyramid level it builds (or one, or one per gauge of the `gauges`)."""
+    at P.n), cell of the grid's range (cell_range; or as many as `cells`, a room for ranges: the shaders stop at
+    its end), or node of the pyramid level it builds over it (or one, or one per gauge of the `gauges`)."""
     kind = STAGES[stage.name][1]
     if kind == "particles":
         return int(params[0]["n"]) if rows is None else rows
@@ -105,12 +106,20 @@ def dispatch_size(stage, params, gauges=1, rows=None):
         return 1
     if kind == "gauges":
         return gauges
-    cells = int(params[0]["cell_total"])
+    first, end = cell_range(params)
     if kind == "cells":
-        return cells
-    for _ in range(stage.level):
+        return end - first if cells is None else cells
+    if cells is None:  # (the nodes over the range: cells.glsl's)
+        return ((end - 1) >> (3 * stage.level)) - (first >> (3 * stage.level)) + 1
+    for _ in range(stage.level):  # (a range of that many cells from any cell spans one node more at most)
         cells = (cells + 7) // 8
-    return cells
+    return cells + 1
+
+
+def cell_range(params):
+    """The cells the grid's cell stages take (grid_range.glsl): a rank's range, else every cell."""
+    P = params[0]
+    return (int(P["cells_first"]), int(P["cells_end"])) if P["cells_end"] > 0 else (0, int(P["cell_total"]))
 
 
 def stage_params(params, stage):
@@ -410,6 +419,7 @@ class VulkanBackend:
         for name in sorted({s.name for s in stages}):
             self._pipeline(name)
         self._recordings = {}
+        self.cells = self._cell_room(params)  # (the cells a recording dispatches for a cell stage: resize)
         self._known = {}  # name -> a copy of a small buffer as the device holds it, until the device runs again
         # DFSPH: each solve's budget (its recorded iterations in the plan) and window
         self.budget = {solve: sum(s.indirect and s.level == solve for s in stages) // 2
@@ -478,7 +488,7 @@ class VulkanBackend:
                                           4 * indirect_offset(stage), predicate=running)
                 else:
                     rec.dispatch(self.pipelines[stage.name], stage_dispatch(stage),
-                                 dispatch_size(stage, self.params, self.gauges, self.rows),
+                                 dispatch_size(stage, self.params, self.gauges, self.rows, self.cells),
                                  predicate=running if block == ALWAYS else None)
                 # a barrier for the commands too where the next stage (of the step, or of the next step) reads
                 # control as one: an indirect dispatch, a block of conditional rendering, or every dispatch
@@ -588,13 +598,17 @@ class VulkanBackend:
         descriptor sets are rebound to the new ones). The uniform gets the new params; with `ahead`, where no
         buffer grows, in the next submission's first commands (queue_first), behind the submission left running,
         which reads it (a rank of sphcore.parallel queues its next step behind its last). The recordings dispatch
-        the buffers' capacity (`rows`), so only a growth frees them (the next steps record anew: a recording of
-        one step's stages is a few milliseconds of Python)."""
+        the buffers' capacity (`rows`) and for a cell stage `cells` (_cell_room: a rank's grid range and room to
+        widen), so only a growth, or a range wider than `cells` or far narrower, frees them (the device settled
+        first; the next steps record anew: a recording of one step's stages is a few milliseconds of Python)."""
         shapes = sized_shapes(params, self.spec)
         grown = [name for name, shape in shapes.items()
                  if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
-        if grown:
-            self.ctx.settle()  # (the old buffers are copied: as the device left them)
+        first, end = cell_range(params)
+        cells = self.cells if end - first <= self.cells <= 1.6 * (end - first) else self._cell_room(params)
+        fresh = grown or cells != self.cells  # (the recordings freed: recorded anew)
+        if fresh:
+            self.ctx.settle()  # (the old buffers are copied: as the device left them; the recordings are freed)
         for name in grown:  # (zeroed first, as numba's: a row a rank writes in part, a halo's, holds no garbage
             old = self.buffers[name]  # that the sort, which leaves some buffers in place, could hand an owned row)
             self.buffers[name] = self.ctx.buffer(int(np.prod(shapes[name]) * HEADROOM) * self.dtypes[name].itemsize,
@@ -610,11 +624,12 @@ class VulkanBackend:
         if grown:
             for name, pipeline in self.pipelines.items():
                 pipeline.bind(self._bound(name), uniform=self.params_buffer)
+        if fresh:
             self._free_recordings()
         self.shapes.update(shapes)
-        self.params = params
+        self.params, self.cells = params, cells
         block = params.view(np.uint8)[:UNIFORM_BYTES]
-        if ahead and not grown:
+        if ahead and not fresh:
             if self._params_copy is None:
                 self.params_next = self.ctx.buffer(UNIFORM_BYTES, "params_next", mapped=True)
                 self._params_copy = self.ctx.record()
@@ -629,6 +644,13 @@ class VulkanBackend:
             if self._params_copy is not None:  # (a copy still queued copies these)
                 self.params_next.write(block)
         self._known = {}
+
+    @staticmethod
+    def _cell_room(params):
+        """The cells a recording dispatches for a cell stage of `params`' range (cell_range): HEADROOM times as
+        many, so that the range may widen a while (a rank's cuts move a layer a step) before it is recorded anew."""
+        first, end = cell_range(params)
+        return min(int((end - first) * HEADROOM), int(params[0]["cell_total"]))
 
     @property
     def rows(self):

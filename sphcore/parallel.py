@@ -342,9 +342,11 @@ class Rank:
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
-        if self.starts is not None:
+        # (one rank exchanges nothing, but with reused lists its exchange's resize has them built every step, as on
+        # several ranks, whose rows change every step)
+        if self.starts is not None and (self.size > 1 or self.sim.scene.spec.LIST_SKIN):
             writes, place = self.exchange()  # [1]-[3] (and the pick's table: write_pick)
-        else:
+        else:  # (the first step, or one rank)
             writes, place = None, []
             self.write_pick(self.sim.n)
         start = self.lap("exchange", start)

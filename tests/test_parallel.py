@@ -509,8 +509,9 @@ def test_cell_stages_over_a_range_of_layers_give_every_cells_bits(backend):
     and a margin): where every particle lies in the range, and the cells counted at the step before too, a step
     gives the bits of a step over every cell, whatever the pyramid held in the range before (garbage written there
     first: each of its levels' nodes over the range is made anew); each layer's first row outside the range is 0
-    below it, n above it, and the cells outside it stay empty. Two steps, the range grown by a layer each side at
-    the second."""
+    below it, n above it (garbage there before too), and the cells outside it stay empty. Three steps, the range
+    grown by a layer each side at the second, to all but two layers each side at the third. On Vulkan the cell
+    stages dispatch the range and room to widen (backends.dispatch_size), recorded anew as the range outgrows it."""
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
@@ -531,9 +532,12 @@ def test_cell_stages_over_a_range_of_layers_give_every_cells_bits(backend):
         layer = decomposition.layers_of(x[:, 1], P["box_min"][1], P["inv_cell"], layers)
         lo, hi = int(layer.min()), int(layer.max()) + 1
         assert lo >= 2 and hi <= layers - 2  # (a range that leaves layers out below and above)
-        for first, end in ((lo, hi), (lo - 1, hi + 1)):
+        rooms = []
+        for first, end in ((lo, hi), (lo - 1, hi + 1), (2, layers - 2)):
             whole.resize(whole.n)
             ranged.resize(ranged.n, (0, 0, first * per_layer, end * per_layer))
+            rooms.append(getattr(ranged.backend, "cells", None))
+            ranged.backend.write_rows("layer_start", 0, np.full(layers, 999, np.uint32))
             pyramid, cells = ranged.backend.read_buffer("cell_pyramid"), int(P["cell_total"])
             for level in range(int(P["levels"]) + 1):  # (each level's nodes over the range: garbage)
                 nodes = np.arange(level_size(cells, level))
@@ -549,6 +553,8 @@ def test_cell_stages_over_a_range_of_layers_give_every_cells_bits(backend):
             assert (starts[:first] == 0).all() and (starts[end:] == ranged.n).all()
             counts = ranged.backend.read_buffer("cell_pyramid")[:int(P["cell_total"])]
             assert not counts[:first * per_layer].any() and not counts[end * per_layer:].any()
+        if backend == "vulkan":
+            assert int(1.25 * (hi - lo) * per_layer) == rooms[0] <= rooms[1] < rooms[2] <= int(P["cell_total"])
 
 
 @pytest.mark.vulkan

@@ -8,6 +8,7 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "cells.glsl"
+#include "grid_range.glsl"
 #include "../pyramid.glsl"
 
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
@@ -16,15 +17,16 @@ layout(std430, binding = 14) buffer GridStatus { uint grid_status[]; };
 layout(std430, binding = 38) writeonly buffer LayerStart { uint layer_start[]; };
 
 void main() {
-    // [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1); outside it no cell holds a
-    //     particle: a layer's first row is 0 before the range, n after it
-    uint c = gl_GlobalInvocationID.x;
-    if (c >= P.cell_total) return;
-    uint per_layer = P.cell_total / (DIM == 3u ? P.grid_dim.z : P.grid_dim.y);
-    if (P.cells_end > 0u && (c < P.cells_first || c >= P.cells_end)) {
-        if (c % per_layer == 0u) layer_start[c / per_layer] = c < P.cells_first ? 0u : P.n;
-        return;
+    // [1] one invocation per cell of the grid's range (grid_range.glsl); outside it no cell holds a
+    //     particle: a layer's first row is 0 before the range, n after it (the range's first cell writes those)
+    uint c = grid_first() + gl_GlobalInvocationID.x;
+    uint layers = DIM == 3u ? P.grid_dim.z : P.grid_dim.y;
+    uint per_layer = P.cell_total / layers;
+    if (c == grid_first()) {
+        for (uint layer = 0u; layer < grid_first() / per_layer; ++layer) layer_start[layer] = 0u;
+        for (uint layer = grid_end() / per_layer; layer < layers; ++layer) layer_start[layer] = P.n;
     }
+    if (c >= grid_end()) return;
     // [2] from the top level down: at level l the cell's ancestor is c / 8^l, and every
     //     sibling before that ancestor (same parent) counts particles that come before c
     uint start = 0u;
@@ -40,5 +42,5 @@ void main() {
     if (c % per_layer == 0u) layer_start[c / per_layer] = start;
     // [4] the top of the pyramid must hold every particle exactly once; a mismatch is counted
     //     in grid_status[2] (an overflow or a lost particle: never silently accepted)
-    if (c == P.cells_first && cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n) atomicAdd(grid_status[2], 1u);
+    if (c == grid_first() && cell_pyramid[level_offset(P.cell_total, P.levels)] != P.n) atomicAdd(grid_status[2], 1u);
 }

@@ -5,13 +5,14 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "grid_range.glsl"
 
 layout(std430, binding = 8) writeonly buffer CellPyramid { uint cell_pyramid[]; };
 
 void main() {
-    // [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1; the others stay empty)
-    uint c = gl_GlobalInvocationID.x;
-    if (c >= P.cell_total || (P.cells_end > 0u && (c < P.cells_first || c >= P.cells_end))) return;
+    // [1] one invocation per cell of the grid's range (grid_range.glsl; the others stay empty)
+    uint c = grid_first() + gl_GlobalInvocationID.x;
+    if (c >= grid_end()) return;
     // [2] no particle counted yet
     cell_pyramid[c] = 0u;
 }

@@ -9,11 +9,12 @@
 // (a migrant: what a step reads of a particle before writing it); a row within the halo's width of the slab
 // (pick_bounds: the slab widened by decomposition.halo_width) is its halo. At D.level 1 a row is taken as integrate
 // will store it (integrate_row.glsl; no shifting: its sums are in scratch_v): at a fixed dt P.dt, before choose_dt
-// (time_state's dt is the last step's), or with an adaptive dt after choose_dt (time_state: the step's, the last's). Migrants take slots from the first zone's first
-// on, the halo from the second's (atomic counts in pick_count: the order of a slot depends on scheduling; the
-// receiver's sort puts every cell in id order whatever its rows). The rows go into the sort's scratch buffers and
-// scratch_vh (Verlet's half-step velocity), which a step writes before it reads them; an entry whose zones end past
-// the rows (P.n) is counted, not written (the host makes room and picks again).
+// (time_state's dt is the last step's), or with an adaptive dt after choose_dt (time_state: the step's, the last's).
+// Migrants take slots from the first zone's first on, the halo from the second's (atomic counts in pick_count: the
+// order of a slot depends on scheduling; the receiver's sort puts every cell in id order whatever its rows). The
+// rows go into the sort's scratch buffers and scratch_vh (Verlet's half-step velocity), which a step writes before
+// it reads them; an entry whose zones end past the rows (P.n) is counted, not written (the host makes room and
+// picks again).
 // Mirror: sphcore/sph/pick_rows.py (same names, same statement order, same step labels).
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x_id = 0) in;

@@ -7,18 +7,17 @@ layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
 #include "cells.glsl"
+#include "grid_range.glsl"
 #include "../pyramid.glsl"
 
 layout(std430, binding = 8) buffer CellPyramid { uint cell_pyramid[]; };
 
 void main() {
-    // [1] one invocation per node of level D.level over the grid's range (P.cells_first .. cells_end - 1: the
-    //     others are empty, and so every node above them only)
-    uint node = gl_GlobalInvocationID.x;
+    // [1] one invocation per node of level D.level over the grid's range (grid_range.glsl; the others are
+    //     empty, and so every node above them only), from the range's first node on
+    uint node = (grid_first() >> (3u * D.level)) + gl_GlobalInvocationID.x;
     uint size = level_size(P.cell_total, D.level);
-    if (node >= size) return;
-    if (P.cells_end > 0u && (node < (P.cells_first >> (3u * D.level))
-                             || node > ((P.cells_end - 1u) >> (3u * D.level)))) return;
+    if (node >= size || node > ((grid_end() - 1u) >> (3u * D.level))) return;
     // [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
     uint below = level_offset(P.cell_total, D.level - 1u);
     uint below_size = level_size(P.cell_total, D.level - 1u);

@@ -10,6 +10,7 @@
 layout(local_size_x_id = 0) in;
 #include "params.glsl"
 #include "constants.glsl"
+#include "grid_range.glsl"
 
 layout(std430, binding = 8) readonly buffer CellPyramid { uint cell_pyramid[]; };
 layout(std430, binding = 9) readonly buffer CellStart { uint cell_start[]; };
@@ -19,9 +20,9 @@ layout(std430, binding = 5) readonly buffer ParticleId { uint particle_id[]; }; 
 uint sort_key(uint i) { return ID_ORDER ? particle_id[i] : i; }
 
 void main() {
-    // [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1: the others are empty)
-    uint c = gl_GlobalInvocationID.x;
-    if (c >= P.cell_total || (P.cells_end > 0u && (c < P.cells_first || c >= P.cells_end))) return;
+    // [1] one invocation per cell of the grid's range (grid_range.glsl; the others are empty)
+    uint c = grid_first() + gl_GlobalInvocationID.x;
+    if (c >= grid_end()) return;
     // [2] the cell's run in the sorted order
     uint start = cell_start[c];
     uint count = cell_pyramid[c];

@@ -9,22 +9,21 @@ import numpy as np
 from numba import njit
 
 from sphcore.pyramid import level_offset, level_size
+from sphcore.sph.grid_range import grid_end, grid_first
 from sphcore.workgroups import launcher
 
 
 @lru_cache(maxsize=None)
 def reduce_cells(spec, real=np.float32):
     @njit
-    def reduce_cells_main(node, params, cell_pyramid):
+    def reduce_cells_main(k, params, cell_pyramid):
         P = params[0]
         D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
-        # [1] one invocation per node of level D.level over the grid's range (P.cells_first .. cells_end - 1: the
-        #     others are empty, and so every node above them only)
+        # [1] one invocation per node of level D.level over the grid's range (grid_range.glsl; the others are
+        #     empty, and so every node above them only), from the range's first node on
+        node = (grid_first(P) >> (3 * D.level)) + k
         size = level_size(P.cell_total, D.level)
-        if node >= size:
-            return
-        if P.cells_end > 0 and (node < (P.cells_first >> (3 * D.level))
-                                or node > ((P.cells_end - 1) >> (3 * D.level))):
+        if node >= size or node > ((grid_end(P) - 1) >> (3 * D.level)):
             return
         # [2] children: nodes 8 node .. 8 node + 7 of the level below (fewer at its end)
         below = level_offset(P.cell_total, D.level - 1)

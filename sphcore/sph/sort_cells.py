@@ -10,6 +10,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.grid_range import grid_end, grid_first
 from sphcore.workgroups import launcher
 
 
@@ -22,10 +23,11 @@ def sort_cells(spec, real=np.float32):
         return particle_id[i] if ID_ORDER else np.uint32(i)
 
     @njit
-    def sort_cells_main(c, params, cell_pyramid, cell_start, sorted_index, particle_id):
+    def sort_cells_main(k, params, cell_pyramid, cell_start, sorted_index, particle_id):
         P = params[0]
-        # [1] one invocation per cell of the grid's range (P.cells_first .. cells_end - 1: the others are empty)
-        if c >= P.cell_total or (P.cells_end > 0 and (c < P.cells_first or c >= P.cells_end)):
+        # [1] one invocation per cell of the grid's range (grid_range.glsl; the others are empty)
+        c = grid_first(P) + k
+        if c >= grid_end(P):
             return
         # [2] the cell's run in the sorted order
         start = cell_start[c]
