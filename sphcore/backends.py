@@ -109,7 +109,7 @@ def dispatch_size(stage, params, gauges=1, rows=None, cells=None):
     first, end = cell_range(params)
     if kind == "cells":
         return end - first if cells is None else cells
-    if cells is None:  # (the nodes over the range: cells.glsl's)
+    if cells is None:  # (the nodes over the range, as reduce_cells.comp takes them)
         return ((end - 1) >> (3 * stage.level)) - (first >> (3 * stage.level)) + 1
     for _ in range(stage.level):  # (a range of that many cells from any cell spans one node more at most)
         cells = (cells + 7) // 8
@@ -604,7 +604,7 @@ class VulkanBackend:
         shapes = sized_shapes(params, self.spec)
         grown = [name for name, shape in shapes.items()
                  if int(np.prod(shape)) * self.dtypes[name].itemsize > self.buffers[name].nbytes]
-        first, end = cell_range(params)
+        first, end = cell_range(params)  # (a range wider than the recordings' cells, or under 1 / 1.6 of them: anew)
         cells = self.cells if end - first <= self.cells <= 1.6 * (end - first) else self._cell_room(params)
         fresh = grown or cells != self.cells  # (the recordings freed: recorded anew)
         if fresh:
