@@ -16,7 +16,8 @@ a rank holds them in. A step:
       ranks' shared memory (Shared: on Vulkan each device copies into and out of it), else one Alltoallv of bytes
       (nothing pickled, nothing picked on the host);
   [3] the received ones written over the old halo's rows, in the submission of [4];
-  [4] the plan's stages (on Vulkan in one submission, two with an adaptive dt), then pick_rows for the next
+  [4] the plan's stages (on Vulkan in one submission; two where the exchange overlaps the step's end; with an
+      adaptive dt the stages up to the dt in one more before them), then pick_rows for the next
       exchange: reduce_dt takes the rank's slab's rows alone, choose_dt at level LARGEST writes the largest |v|^2
       and |a|^2 as its first partial, and the largest over the ranks (Allreduce) goes there, so every rank's
       choose_dt takes the same dt, the minimum over the ranks. Where the exchange overlaps the step's end
@@ -335,20 +336,19 @@ class Rank:
         `seconds`: exchange ([1]-[3]: the cuts, the rows read back, the Alltoallv, the new halo's copies listed),
         stages ([4], the new halo written first in the same submission, the pick of the rows the next step's
         exchange sends: none on one rank; where the exchange overlaps the step's end, the wait for the last step's
-        second submission too), dt (the partials read back and their Allreduce)."""
+        second submission too), dt (the largest partial read and its Allreduce)."""
         from mpi4py import MPI
         if self.sim.gauges is not None:  # (the gauges' rings are read before a step could fill them)
             if self.sim.gauges.since >= self.sim.gauges.slots(self.layers).min():
                 self.read_gauges()
             self.sim.gauges.since += 1
         start = time.perf_counter()
-        # (one rank exchanges nothing, but with reused lists its exchange's resize has them built every step, as on
-        # several ranks, whose rows change every step)
-        if self.starts is not None and (self.size > 1 or self.sim.scene.spec.LIST_SKIN):
-            writes, place = self.exchange()  # [1]-[3] (and the pick's table: write_pick)
-        else:  # (the first step, or one rank)
-            writes, place = None, []
+        writes, place = None, []
+        if self.starts is None:  # (the first step: the pick's table of what is held)
             self.write_pick(self.sim.n)
+        elif self.size > 1 or self.sim.scene.spec.LIST_SKIN:  # (one rank exchanges nothing, but with reused lists
+            # its exchange's resize has them built every step, as on several ranks, whose rows change every step)
+            writes, place = self.exchange()  # [1]-[3] (and the pick's table: write_pick)
         start = self.lap("exchange", start)
         backend, self.published = self.sim.backend, None
         pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
