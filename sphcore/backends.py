@@ -36,7 +36,8 @@ HEADROOM = 1.25  # a load past a backend's capacity grows its buffers to this ma
 # Vulkan: the small buffers the host writes and reads every step of a rank's exchange (sphcore.parallel.Rank), and
 # dt_partial, whose first row it reads and writes (Rank.reduce_dt), in memory the host maps where the device has it
 # (host-visible device memory: no submission to write or read them)
-MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table", "dt_partial")
+MAPPED = ("pick_table", "pick_bounds", "pick_count", "control", "layer_start", "place_table", "dt_partial",
+          "rank_groups")
 # read_regions packs each region from a multiple of PACK_GRAIN bytes: an H100 copied 40 runs of 1.1 MB in 194 us where
 # each run's bytes were a multiple of 16, in 520 us where they were one of 4 (benchmarks/copy_regions.py)
 PACK_GRAIN = 16
@@ -62,9 +63,17 @@ def profile_name(stage):
     return stage.name + (" (walk)" if stage.when == REUSE else "")
 
 
-def indirect_offset(stage):
-    """The index in control of an indirect stage's (x, y, z) work group counts (dfsph.glsl)."""
-    return dispatch_base(stage.level)
+# A rank's indirect stages (sphcore.parallel) and the row of rank_groups with their (x, y, z) work group counts: the
+# pick's rows (pick_groups.comp writes them) and the received rows (the host writes them).
+RANK_GROUPS = {"compute_forces": 0, "pick_rows": 0, "pack_rows": 0, "place_rows": 1}
+
+
+def indirect_source(stage):
+    """Where an indirect stage's (x, y, z) work group counts are: (buffer, index of the first): a rank's in
+    rank_groups (RANK_GROUPS), a DFSPH solve's in control (dfsph.glsl)."""
+    if stage.name in RANK_GROUPS:
+        return "rank_groups", 4 * RANK_GROUPS[stage.name]
+    return "control", dispatch_base(stage.level)
 
 
 def check_obstacles(state, spec):
@@ -287,10 +296,9 @@ class NumbaBackend:
         return launch
 
     def _groups(self, stage):
-        """A stage's work groups, or for an indirect one the index in control to read them from
-        (as a negative number: -1 - index)."""
+        """A stage's work groups, or for an indirect one where to read them from (indirect_source)."""
         if stage.indirect:
-            return -1 - indirect_offset(stage)
+            return indirect_source(stage)
         return group_count(dispatch_size(stage, self.params, self.gauges), self.local_size)
 
     def _launch_groups(self, groups, when=ALWAYS):
@@ -298,7 +306,10 @@ class NumbaBackend:
         as control[CONTROL_REBUILD] says)."""
         if when != ALWAYS and (self.state["control"][CONTROL_REBUILD] != 0) != (when == BUILD):
             return 0
-        return groups if groups >= 0 else int(self.state["control"][-1 - groups])
+        if isinstance(groups, tuple):
+            name, index = groups
+            return int(self.state[name].reshape(-1)[index])
+        return groups
 
     def warm_up(self, after_each=None):
         """Compile every stage of the plan without running it (a launch of no work groups: numba
@@ -484,8 +495,9 @@ class VulkanBackend:
                     rec.begin_conditional(when(stage.when))
                     block = stage.when
                 if stage.indirect:
-                    rec.dispatch_indirect(self.pipelines[stage.name], stage_dispatch(stage), control,
-                                          4 * indirect_offset(stage), predicate=running)
+                    name, index = indirect_source(stage)
+                    rec.dispatch_indirect(self.pipelines[stage.name], stage_dispatch(stage), self.buffers[name],
+                                          4 * index, predicate=running)
                 else:
                     rec.dispatch(self.pipelines[stage.name], stage_dispatch(stage),
                                  dispatch_size(stage, self.params, self.gauges, self.rows, self.cells),

@@ -17,7 +17,9 @@ particle itself. With bodies a step reads a third level: a wall particle within 
 and velocity (wall_pressure, Adami et al. 2012) from the fluid within h of it, whose densities and pressures are
 their own neighbours' sums (with continuity from those neighbours' positions, velocities and densities, a wall
 particle's among them: state, as its owner wrote it the step before). A height gauge's line takes the point below
-each of its points in the slab, half a spacing past the cut at most: the halo reaches that much farther.
+each of its points in the slab, half a spacing past the cut at most: the halo reaches that much farther. A rank
+sums the densities of the particles it holds up to a reach less than that (summed_width): no step reads a density in
+the halo's outermost reach.
 """
 import math
 import os
@@ -57,6 +59,14 @@ def halo_width(scene):
     height = any(gauge["quantity"] == "height" for gauge in scene.config.get("gauges", []))
     depth = BODIES_DEPTH if scene.spec.BODIES else DEPTH
     return (depth * scene.reach + (scene["fluid.spacing"] / 2 if height else 0.0)) * MARGIN
+
+
+def summed_width(scene):
+    """How far past its slab [m] a rank sums the densities of the particles it holds (compute_density: summed.glsl):
+    a reach less than the halo's DEPTH (BODIES_DEPTH) reaches, and MARGIN. The halo's outermost reach is held for
+    those sums alone, and a height gauge's points past the slab read positions alone (sample_gauges.comp)."""
+    depth = BODIES_DEPTH if scene.spec.BODIES else DEPTH
+    return (depth - 1) * scene.reach * MARGIN
 
 
 def layers_of(coordinate, box_min, inv_cell, layers):

@@ -67,7 +67,7 @@ from sphcore.signals import Signals
 from sphcore.stage import Stage
 from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.pick_table import PICK_ALIGN
-from sphcore.stepper import LOADED, Simulation, wall_particles
+from sphcore.stepper import LOADED, SLAB_FIELDS, Simulation, wall_particles
 from sphcore.vk_runner import Context
 
 def world():
@@ -144,6 +144,21 @@ PACKED = {"particle_x": "scratch_x", "particle_v": "scratch_v", "particle_rho": 
 PICKED_ROWS, OTHER_ROWS, BEFORE_INTEGRATE = 1, 2, 1
 # choose_dt's level that writes the largest of a rank's partials as the first (Rank.reduce_dt)
 LARGEST = 1
+# After the sort, the rows the pick reads and their work groups (pick_groups.comp), for the stages of one invocation a
+# row the pick reads or a row received, indirect dispatches (backends.RANK_GROUPS): compute_forces' first pass,
+# pick_rows, pack_rows, place_rows
+PICK_GROUPS = Stage("pick_groups")
+
+
+def over_rows(name, level=0):
+    """Stage `name` at `level`, of one invocation a row the pick reads or a row received (an indirect dispatch)."""
+    return Stage(name, level, True)
+
+
+def write_groups(backend, row, invocations):
+    """Row `row` of rank_groups: the work groups of `invocations` invocations, as pick_groups.comp writes row 0 (the
+    host writes row 1, place_rows', with the rows received)."""
+    backend.write_mapped("rank_groups", row, [-(-invocations // backend.local_size), 1, 1, invocations])
 
 
 def sent_buffers(spec):
@@ -171,6 +186,7 @@ class Slabs:
         self.layers = int(P["grid_dim"][self.axis])
         self.per_layer = int(np.prod(P["grid_dim"][:self.axis]))  # (cells.glsl: the layer is the slowest index)
         self.width = decomposition.halo_width(scene)
+        self.summed = decomposition.summed_width(scene)
         self.reach = decomposition.reach_layers(self.width, self.inv_cell)
 
     def layers_of(self, x):
@@ -273,9 +289,9 @@ class Rank:
         self.overlap = (self.size > 1 and not spec.SHIFTING and not spec.LIST_SKIN and names[-1:] == ["integrate"]
                         and set(names[forces + 1:]) <= {"sample_gauges", "reduce_dt", "choose_dt", "integrate"})
         if self.adaptive:
-            self.band, self.inside = self.after_dt[:-1], self.after_dt[-1:]
+            self.band, self.inside = self.after_dt[:-1] + [PICK_GROUPS], self.after_dt[-1:]
         else:
-            self.band = sim.stages[:forces] + [Stage("compute_forces", PICKED_ROWS)]
+            self.band = sim.stages[:forces] + [PICK_GROUPS, over_rows("compute_forces", PICKED_ROWS)]
             self.inside = [Stage("compute_forces", OTHER_ROWS)] + sim.stages[forces + 1:]
         self.published = None  # (the outbox the step's pack wrote and published from: the exchange then packs none)
         self.seconds = dict.fromkeys(PARTS, 0.0)  # (a profile of step)
@@ -297,7 +313,7 @@ class Rank:
         self.shared = Shared.make(comm, sim.backend) if self.peers is None else None
         self.gauge_rows = []  # (rank 0: the gauges' samples read and not yet taken)
         self.good = None  # (what this rank held at the last step a check passed: keep, replay)
-        sim.resize(sim.n, self.owned_cells())
+        sim.resize(sim.n, self.slab_fields())
         walls, body = wall_particles(sim.scene)  # (fixed: every rank knows them all, as health.check_bodies asks)
         sim.walls = {"particle_x": walls.astype(buffer_dtype("particle_x", precision)), "body": body}
 
@@ -308,7 +324,7 @@ class Rank:
         x = checkpoint["buffer_particle_x"]
         self.cuts, keep = share(self.sim.scene, self.size, self.rank, x=x[:, :self.sim.dim])
         self.next_cuts, self.picked = self.cuts.copy(), None
-        self.sim.restore(checkpoint, keep, self.owned_cells())
+        self.sim.restore(checkpoint, keep, self.slab_fields())
         self.start_owned, self.starts = self.held_owned(), None
         self.keep()  # (the checkpoint's state, checked when it was written: a replay's start)
 
@@ -318,14 +334,19 @@ class Rank:
         owner = decomposition.owners(self.slabs.layers_of(held["particle_x"][:, self.axis]), self.cuts)
         return take(held, owner == self.rank)
 
-    def owned_cells(self):
-        """The cells of this rank's slab, and those its particles can be in (params.glsl: owned_first, owned_end,
-        cells_first, cells_end): the slab's layers, the reach past each cut (the halo), a layer more (a particle
-        owned at the last step: it moved a layer at most) and another (the cuts move a layer a step at most, so the
-        cells counted at the last step are in the range now: the grid's cell stages leave every other cell empty)."""
+    def slab_fields(self):
+        """The cells of this rank's slab, those its particles can be in, and the coordinates of the rows whose density
+        it sums (sphcore.stepper.SLAB_FIELDS): the slab's layers; the reach past each cut (the halo), a layer more (a
+        particle owned at the last step: it moved a layer at most) and another (the cuts move a layer a step at most,
+        so the cells counted at the last step are in the range now: the grid's cell stages leave every other cell
+        empty); the slab widened by decomposition.summed_width (float32, as the parameter block holds them), open
+        where the domain ends."""
         lo, hi = self.cuts[self.rank], self.cuts[self.rank + 1]
         first, end = max(lo - self.reach - 2, 0), min(hi + self.reach + 2, self.layers)
-        return tuple(layer * self.per_layer for layer in (lo, hi, first, end))
+        bottom, top = (self.slabs.box_min + cut * self.slabs.cell_size for cut in (lo, hi))
+        summed = (np.float32(bottom - self.slabs.summed if lo > 0 else -np.inf),
+                  np.float32(top + self.slabs.summed if hi < self.layers else np.inf))
+        return (*(layer * self.per_layer for layer in (lo, hi, first, end)), *summed)
 
     def owned_rows(self):
         """The rows of the particles this rank owns, after a step: those the sort put in its slab's layers."""
@@ -351,7 +372,7 @@ class Rank:
             writes, place = self.exchange()  # [1]-[3] (and the pick's table: write_pick)
         start = self.lap("exchange", start)
         backend, self.published = self.sim.backend, None
-        pick = [Stage("pick_rows")] if self.entries else []  # (none on one rank)
+        pick = [PICK_GROUPS, over_rows("pick_rows")] if self.entries else []  # (none on one rank)
         stages = self.before_dt  # [4]
         if self.adaptive:  # (up to the dt, waited for, the last step's second too; then the dt over the ranks)
             backend.run_stages(place + self.before_dt, writes)
@@ -363,9 +384,9 @@ class Rank:
             outbox = self.peers.outbox if self.peers else None
             if outbox is not None:
                 backend.bind_words("sent", outbox.buffer)
-            pack = [Stage("pack_rows")] if outbox is not None else []
+            pack = [over_rows("pack_rows")] if outbox is not None else []
             # both submissions queued behind the last step's second (ahead), waited for up to the first
-            backend.run_stages(place + self.band + [Stage("pick_rows", BEFORE_INTEGRATE)] + pack, writes, wait=False)
+            backend.run_stages(place + self.band + [over_rows("pick_rows", BEFORE_INTEGRATE)] + pack, writes, wait=False)
             backend.run_stages(self.inside, wait=False)  # (waited for in the next step, or as the device is read)
             backend.settle(keep=1)
         else:
@@ -457,6 +478,7 @@ class Rank:
         self.write_pick(n)  # (the tables only the next step's first submission reads: written as the second runs)
         if placed:
             backend.write_mapped("place_table", 0, self.place_table(received_rows, sources, first, end))
+            write_groups(backend, 1, int(received_rows.sum()))
             backend.bind_words("received", self.peers.inbox.buffer)
         start = self.lap("write", start)
         if not placed:  # (else the next step's submissions queue behind the second: ahead)
@@ -466,12 +488,11 @@ class Rank:
             self.seconds["exchange"] -= waited
         # a resize only where the count or the slab changed, or to have reused lists built (the rows moved and
         # written are listed by row: the buffers keep the rows past a smaller count)
-        cells = (P["owned_first"], P["owned_end"], P["cells_first"], P["cells_end"])
-        if n != self.sim.n or cells != self.owned_cells() or self.sim.scene.spec.LIST_SKIN:
-            self.sim.resize(n, self.owned_cells(), ahead=placed)
+        if n != self.sim.n or tuple(P[list(SLAB_FIELDS)]) != self.slab_fields() or self.sim.scene.spec.LIST_SKIN:
+            self.sim.resize(n, self.slab_fields(), ahead=placed)
         if placed:
             self.lap("write", start)
-            return ([], move), [Stage("place_rows")]
+            return ([], move), [over_rows("place_rows")]
         at, parts = 0, {}  # (every rank's rows in one submission, with the move: its memory's regions)
         for q_rows, (data, offset) in zip(received_rows, sources):
             regions = parts.setdefault(id(data), (data, []))[1]
@@ -607,9 +628,9 @@ class Rank:
         zones = self.zones()
         if self.entries and (picked is None or 2 * zones.sum() > self.sim.n):
             if 2 * zones.sum() > self.sim.n:  # (the table's rows held as they were)
-                self.sim.resize(int(2 * zones.sum()), self.owned_cells())
+                self.sim.resize(int(2 * zones.sum()), self.slab_fields())
                 backend.write_rows("pick_count", 0, np.zeros(2 * PICK_ENTRIES, np.uint32))
-            backend.run_stages([Stage("pick_rows")])
+            backend.run_stages([PICK_GROUPS, over_rows("pick_rows")])
             picked, self.published = backend.read_rows("pick_count", 0, 2 * len(self.entries)), None
         self.picked = None
         rows, regions = np.zeros((self.size, 2), np.int64), []
@@ -631,7 +652,7 @@ class Rank:
         scratch buffers into the peers' outbox, as the step's last stage writes them where the exchange overlaps
         it."""
         self.sim.backend.bind_words("sent", self.peers.outbox.buffer)
-        self.sim.backend.run_stages([Stage("pack_rows")])
+        self.sim.backend.run_stages([over_rows("pack_rows")])
 
     def owned(self):
         """The particles this rank owns after a step (LOADED arrays, in the device's order), or at the start."""
@@ -771,7 +792,7 @@ class Rank:
         a step at a time, each checked, up to the step whose check failed: the first that fails raises. The steps
         are the same bits as the first time (any cuts give one rank's)."""
         failed_at, (carried, self.cuts, self.next_cuts, self.starts, step) = self.sim.step_count, self.good
-        self.sim.load({name: carried[name] for name in LOADED}, self.owned_cells())
+        self.sim.load({name: carried[name] for name in LOADED}, self.slab_fields())
         for name in CARRIED:
             if name not in LOADED:
                 self.sim.backend.write_buffer(name, carried[name])

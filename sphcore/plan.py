@@ -24,6 +24,7 @@ from sphcore.sph.gather_particles import gather_particles
 from sphcore.sph.integrate import integrate
 from sphcore.sph.integrate_density import integrate_density
 from sphcore.sph.pack_rows import pack_rows
+from sphcore.sph.pick_groups import pick_groups
 from sphcore.sph.pick_rows import pick_rows
 from sphcore.sph.place_rows import place_rows
 from sphcore.sph.reduce_cells import reduce_cells
@@ -86,6 +87,7 @@ BUFFERS = {
     "place_table": (np.uint32, 4, 1 + PICK_ENTRIES),
     "sent": (np.uint32, 1, 2),
     "band_rows": (np.uint32, 2, 1 + PICK_ENTRIES),
+    "rank_groups": (np.uint32, 4, 2),
 }
 # particle_kappa: DFSPH's stiffness sum of the last constant-density solve, the next one's warm start
 # (sorted with the particles, with scratch_rho as its scratch: DFSPH has no continuity density).
@@ -125,9 +127,11 @@ BUFFERS = {
 # received, place_table: a rank's rows pulled from GPU to GPU (place_rows.comp): on Vulkan the peers' inbox is bound
 # in received's place (backend.bind_words; numba: the bytes' array); the table: the senders, the owned rows' first
 # and end, the rows received, then a row a sender (its first word, its migrants and halo rows).
-# band_rows: on a rank whose exchange overlaps the step's end, the rows its pick reads (the entries' first row and
-# count, after their number), which compute_forces' first pass writes for its second (the host writes the pick's
-# table for the next step while that runs: sphcore.parallel).
+# band_rows, rank_groups: on a rank, the rows its pick reads (the entries' first row and count, after their number),
+# which pick_groups writes after the sort for compute_forces' two passes and pick_rows (the host writes the pick's
+# table for the next step while the second pass runs: sphcore.parallel); the (x, y, z) work groups of the indirect
+# dispatches of one invocation a row (backends.RANK_GROUPS) and the rows: [0] those (pick_groups), [1] the rows
+# received (place_rows: the host writes them).
 # sent: the rows a rank sends from GPU to GPU (pack_rows.comp: those pick_count counts, laid out from the pick's
 # table), the peers' outbox bound in its place.
 # gauge_layers: on a rank, a force or moment gauge's sum over each cell layer, a ring of LAYER_SLOTS samples a gauge
@@ -161,8 +165,7 @@ STAGES = {
     "compute_forces": (compute_forces, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho",
                                                      "particle_p", "particle_id", "cell_pyramid", "cell_start", "scratch_x",
                                                      "obstacle_box", "control", "neighbours",
-                                                     "neighbour_count", "scratch_v", "pick_table", "layer_start",
-                                                     "band_rows")),
+                                                     "neighbour_count", "scratch_v", "band_rows")),
     "wall_pressure": (wall_pressure, "particles", ("particle_x", "particle_v", "particle_rho", "particle_p",
                                                    "particle_id", "cell_pyramid", "cell_start", "scratch_x",
                                                    "obstacle_box", "neighbours", "neighbour_count")),
@@ -193,7 +196,8 @@ STAGES = {
     "pick_rows": (pick_rows, "particles", ("particle_x", "particle_v", "particle_a", "particle_rho", "particle_id",
                                            "particle_vh", "obstacle_box", "time_state", "scratch_x", "scratch_v",
                                            "scratch_id", "scratch_rho", "scratch_vh", "pick_table", "pick_bounds",
-                                           "pick_count", "layer_start")),
+                                           "pick_count", "layer_start", "band_rows")),
+    "pick_groups": (pick_groups, "one", ("pick_table", "layer_start", "band_rows", "rank_groups")),
     "pack_rows": (pack_rows, "particles", ("scratch_x", "scratch_v", "scratch_id", "scratch_rho", "scratch_vh",
                                            "sent", "pick_table", "pick_count", "layer_start")),
     "place_rows": (place_rows, "particles", ("particle_x", "particle_v", "particle_rho", "particle_id", "particle_vh",

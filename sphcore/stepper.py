@@ -27,6 +27,9 @@ from sphcore.surface import particle_surface
 READ = tuple(dict.fromkeys((*PARTICLE_BUFFERS, "grid_status", *CARRIED)))
 # The per-particle buffers of CARRIED: what Simulation.load takes.
 LOADED = tuple(name for name in CARRIED if BUFFERS[name][2] == "particles")
+# A rank's fields of the parameter block (params.glsl; sphcore.parallel.Rank.slab_fields): the cells of its slab, those
+# the grid's cell stages take, and the coordinates along the slab axis of the rows whose density it sums.
+SLAB_FIELDS = ("owned_first", "owned_end", "cells_first", "cells_end", "summed_min", "summed_max")
 
 
 def wall_particles(scene):
@@ -313,60 +316,59 @@ class Simulation:
         return arrays
 
     @_exclusive
-    def load(self, particles, owned_cells=(0, 0)):
+    def load(self, particles, slab=(0, 0)):
         """Hold another set of particles from now on: `particles` maps every per-particle buffer of CARRIED
         (LOADED) to an array, rows in any order, with the particles' global ids in particle_id (ids of
         fluid_count and up are the bodies' wall particles). The other carried buffers (the time, the grid's
         status, the iteration control), the obstacles and the gauges (their table and state) are kept, every other buffer is zeroed (as at the
         start), and the next step builds its neighbour lists. A rank of sphcore.parallel loads its owned and halo
-        particles at the start; `owned_cells`: the cells of its slab, and those its particles can be in
-        (params.glsl: owned_first, owned_end, cells_first, cells_end; (0, 0): every particle is owned, every cell
-        taken). The backend stays (no compile, no new Vulkan device): its buffers keep their
-        size while the set fits, n in the parameter block (Vulkan: its uniform) becomes the count, and the
-        dispatch sizes follow it (backends: load). read() and checkpoint() check and save the whole scene: call
-        them with every particle loaded. With gauges, only a rank's (owned_cells given: its gauges sample its slab)."""
-        if self.gauges is not None and not any(owned_cells):
+        particles at the start; `slab`: the cells of its slab, those its particles can be in, and the coordinates
+        of the rows whose density it sums (SLAB_FIELDS; (0, 0): every particle is owned, every cell taken). The
+        backend stays (no compile, no new Vulkan device): its buffers keep their size while the set fits, n in the
+        parameter block (Vulkan: its uniform) becomes the count, and the dispatch sizes follow it (backends: load).
+        read() and checkpoint() check and save the whole scene: call them with every particle loaded. With gauges,
+        only a rank's (slab given: its gauges sample its slab)."""
+        if self.gauges is not None and not any(slab):
             raise SimulationError("Simulation.load(): the scene's gauges sample by particle id across the whole "
                                   "scene; a scene with [[gauges]] cannot load another particle set yet")
         kept = [name for name in CARRIED if name not in LOADED] + ["obstacle_box", "gauge_table", "gauge_state"]
-        params = self._count(len(particles["particle_id"]), owned_cells)
+        params = self._count(len(particles["particle_id"]), slab)
         self.backend.load(params, {name: particles[name] for name in LOADED}, kept)
 
     @_exclusive
-    def resize(self, n, owned_cells=(0, 0), ahead=False):
+    def resize(self, n, slab=(0, 0), ahead=False):
         """Hold n particles from now on, the rows up to the old count as they are (a rank of sphcore.parallel
-        writes the rows that change: backend.write_rows); `owned_cells` as load's. The next step builds its
+        writes the rows that change: backend.write_rows); `slab` as load's. The next step builds its
         neighbour lists. (`ahead`: the backend's resize's.)"""
-        self.backend.resize(self._count(n, owned_cells), ahead)
+        self.backend.resize(self._count(n, slab), ahead)
 
-    def params_of(self, n, owned_cells=(0, 0)):
-        """The parameter block of n particles (the fluid's first) and `owned_cells` (load's): the bytes of the scene's
+    def params_of(self, n, slab=(0, 0)):
+        """The parameter block of n particles (the fluid's first) and `slab` (load's): the bytes of the scene's
         block, made once (scene.params: 75 us, which a rank of sphcore.parallel would spend every step), with those
         set. (A byte copy: a record's copy() leaves its padding unset, and a checkpoint keeps every byte.)"""
         if self._params_bytes is None:
             self._params_bytes = self.scene.params(0, self.fluid_count).tobytes()
         params = np.frombuffer(bytearray(self._params_bytes), PARAMS_DTYPE)
         params[0]["n"] = n
-        fields = ("owned_first", "owned_end", "cells_first", "cells_end")  # (the last two: a rank's grid range)
-        for field, value in zip(fields, owned_cells):
+        for field, value in zip(SLAB_FIELDS, slab):
             params[0][field] = value
         return params
 
-    def _count(self, n, owned_cells):
-        """The parameter block of n particles and `owned_cells`, taken as the simulation's; the next step builds its
+    def _count(self, n, slab):
+        """The parameter block of n particles and `slab`, taken as the simulation's; the next step builds its
         lists (those of the set held before are of other rows)."""
-        params = self.params_of(n, owned_cells)
+        params = self.params_of(n, slab)
         self.params, self.n, self._carried = params, n, None
         self.backend.write_mapped("control", CONTROL_REBUILD, [1])  # (while a submission left running goes on)
         return params
 
     @_exclusive
-    def restore(self, arrays, keep=None, owned_cells=(0, 0)):
+    def restore(self, arrays, keep=None, slab=(0, 0)):
         """Continue from `arrays` (of `checkpoint()`, possibly on another backend): its buffers
         replace the backend's, its step becomes the step count. The energy bound is not taken
         from `arrays`: it is the energy of the scene's initial state, which the backend holds until
         the first restore (a stored energy_start that differs from it is refused). A rank of sphcore.parallel
-        holds the rows `keep` (a mask) of the checkpoint's particles from then on (load: `owned_cells` its slab);
+        holds the rows `keep` (a mask) of the checkpoint's particles from then on (load: `slab` its slab);
         it has its energy_start of the initial state (gathered) first."""
         if self.energy_start is None:
             self.read()  # the initial state: its energy is the bound, as in a run never stopped
@@ -383,7 +385,7 @@ class Simulation:
                 if len(arrays[f"buffer_{name}"]) != total:
                     raise CheckpointError(f"checkpoint buffer {name} has {len(arrays[f'buffer_{name}'])} rows, this "
                                           f"scene {total} particles")
-            self.load({name: arrays[f"buffer_{name}"][keep] for name in LOADED}, owned_cells)
+            self.load({name: arrays[f"buffer_{name}"][keep] for name in LOADED}, slab)
             whole = [name for name in CARRIED if name not in LOADED]
         current = self.backend.read(whole)
         for name in whole:

@@ -255,9 +255,8 @@ def test_pick_rows_packs_what_each_rank_needs(backend):
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
-    from sphcore.parallel import PACKED, sent_buffers
+    from sphcore.parallel import PACKED, PICK_GROUPS, over_rows, sent_buffers
     from sphcore.plan import PICK_ENTRIES
-    from sphcore.stage import Stage
     scene = sphcore.Scene.from_dict(small_dam_break())
     with sphcore.Simulation(scene, backend, id_order=True) as sim:
         sim.step(30)
@@ -287,7 +286,7 @@ def test_pick_rows_packs_what_each_rank_needs(backend):
         b.write_buffer("pick_table", table)
         b.write_buffer("pick_bounds", bounds)
         b.write_buffer("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))
-        b.run_stages([Stage("pick_rows")])
+        b.run_stages([PICK_GROUPS, over_rows("pick_rows")])
         counts = b.read_buffer("pick_count").reshape(-1, 2)
         held = {name: b.read_rows(name, 0, n) for name in PACKED}
         packed = {name: b.read_rows(PACKED[name], 0, slot) for name in PACKED}
@@ -319,9 +318,8 @@ def test_place_rows_writes_each_senders_rows(backend, precision):
         from conftest import vulkan_or_skip
         vulkan_or_skip()
     from sphcore.backends import packed
-    from sphcore.parallel import sent_buffers
+    from sphcore.parallel import over_rows, sent_buffers, write_groups
     from sphcore.plan import PICK_ENTRIES, row_bytes
-    from sphcore.stage import Stage
     scene = sphcore.Scene.from_dict(small_dam_break(precision=precision))
     with sphcore.Simulation(scene, backend, id_order=True) as sim:
         sim.step(5)
@@ -356,7 +354,8 @@ def test_place_rows_writes_each_senders_rows(backend, precision):
             b.bind_words("received", buffer)
         else:
             b.bind_words("received", received.view(np.uint8))
-        b.run_stages([Stage("place_rows")])
+        write_groups(b, 1, int(table[0, 3]))
+        b.run_stages([over_rows("place_rows")])
         rows = np.concatenate([np.arange(first), np.arange(end, end + m - first)])  # (the row of received row a)
         for name, values in before.items():
             after = b.read_rows(name, 0, end + m - first)
@@ -384,9 +383,8 @@ def test_pack_rows_writes_what_read_regions_reads(backend, precision):
         from conftest import vulkan_or_skip
         vulkan_or_skip()
     from sphcore.backends import packed
-    from sphcore.parallel import PACKED, sent_buffers
+    from sphcore.parallel import PACKED, PICK_GROUPS, over_rows, sent_buffers
     from sphcore.plan import PICK_ENTRIES, row_bytes
-    from sphcore.stage import Stage
     scene = sphcore.Scene.from_dict(small_dam_break(precision=precision))
     with sphcore.Simulation(scene, backend, id_order=True) as sim:
         n, b = sim.n, sim.backend
@@ -423,7 +421,7 @@ def test_pack_rows_writes_what_read_regions_reads(backend, precision):
                 b.bind_words("sent", buffer)
             else:
                 b.bind_words("sent", words.view(np.uint8))
-            b.run_stages([Stage("pack_rows")])
+            b.run_stages([PICK_GROUPS, over_rows("pack_rows")])  # (the pick's rows, which bound those sent)
             sent = buffer.read(np.uint8, (size,)) if backend == "vulkan" else words.view(np.uint8)
             if size < nbytes:
                 assert (sent.view(np.uint32) == 0xA5A5A5A5).all()
@@ -451,7 +449,7 @@ def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bit
     if backend == "vulkan":
         from conftest import vulkan_or_skip
         vulkan_or_skip()
-    from sphcore.parallel import PACKED, PICKED_ROWS, OTHER_ROWS, BEFORE_INTEGRATE
+    from sphcore.parallel import PACKED, PICK_GROUPS, PICKED_ROWS, OTHER_ROWS, BEFORE_INTEGRATE, over_rows
     from sphcore.plan import PICK_ENTRIES
     from sphcore.stage import Stage
     from sphcore.stepper import LOADED
@@ -463,11 +461,11 @@ def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bit
         forces = names.index("compute_forces")
         if dt == "fixed":
             assert names[forces + 1:] == ["sample_gauges", "choose_dt", "integrate"]
-            band = two.stages[:forces] + [Stage("compute_forces", PICKED_ROWS)]
+            band = two.stages[:forces] + [PICK_GROUPS, over_rows("compute_forces", PICKED_ROWS)]
             inside = [Stage("compute_forces", OTHER_ROWS)] + two.stages[forces + 1:]
         else:
             assert names[forces + 1:] == ["sample_gauges", "reduce_dt", "choose_dt", "integrate"]
-            band, inside = two.stages[:-1], two.stages[-1:]
+            band, inside = two.stages[:-1] + [PICK_GROUPS], two.stages[-1:]
         layers = int(one.params[0]["grid_dim"][1])
         table = np.zeros((1 + PICK_ENTRIES, 4), np.uint32)
         bounds = np.zeros((PICK_ENTRIES, 4), np.float32)
@@ -481,8 +479,8 @@ def test_a_step_in_two_passes_with_the_pick_before_integrate_gives_one_passs_bit
                 for name, values in (("pick_table", table), ("pick_bounds", bounds),
                                      ("pick_count", np.zeros(2 * PICK_ENTRIES, np.uint32))):
                     sim.backend.write_rows(name, 0, values)
-            one.backend.run_stages(one.stages + [Stage("pick_rows")])
-            two.backend.run_stages(band + [Stage("pick_rows", BEFORE_INTEGRATE)])
+            one.backend.run_stages(one.stages + [PICK_GROUPS, over_rows("pick_rows")])
+            two.backend.run_stages(band + [over_rows("pick_rows", BEFORE_INTEGRATE)])
             whole = table.copy()  # (the next step's table, written as the second pass runs: one entry, every layer)
             whole[0, 0], whole[1] = 1, (0, layers, 0, 1)
             two.backend.write_rows("pick_table", 0, whole)
@@ -555,6 +553,39 @@ def test_cell_stages_over_a_range_of_layers_give_every_cells_bits(backend):
             assert not counts[:first * per_layer].any() and not counts[end * per_layer:].any()
         if backend == "vulkan":
             assert int(1.25 * (hi - lo) * per_layer) == rooms[0] <= rooms[1] < rooms[2] <= int(P["cell_total"])
+
+
+@pytest.mark.parametrize("density", ["continuity", "summation"])
+@pytest.mark.parametrize("backend", ["numba", pytest.param("vulkan", marks=pytest.mark.vulkan)])
+def test_a_rank_sums_the_densities_of_its_band_alone(backend, density):
+    """On a rank (owned_end > 0) compute_density takes the rows whose coordinate along the slab axis lies in
+    summed_min .. summed_max (summed.glsl) alone: those get the bits of a pass over every row, the others keep what
+    they held (a sentinel written first)."""
+    if backend == "vulkan":
+        from conftest import vulkan_or_skip
+        vulkan_or_skip()
+    from sphcore.stage import Stage
+    diffusion = {} if density == "continuity" else {"density_diffusion": "none"}
+    scene = sphcore.Scene.from_dict(small_dam_break(density=density, **diffusion))
+    with sphcore.Simulation(scene, backend, id_order=True) as whole, \
+            sphcore.Simulation(scene, backend, id_order=True) as banded:
+        whole.step(20)
+        banded.step(20)
+        cells = int(whole.params[0]["cell_total"])
+        whole.resize(whole.n, (0, cells, 0, cells, -np.inf, np.inf))
+        banded.resize(banded.n, (0, cells, 0, cells, 0.1, 0.3))
+        written = ("particle_p", "particle_drho") if density == "continuity" else ("particle_p", "particle_rho")
+        for sim in (whole, banded):
+            for name in written:
+                sim.backend.write_buffer(name, np.full_like(sim.backend.read_buffer(name), -7.0))
+            sim.backend.run_stages([Stage("compute_density")])
+        y = banded.backend.read_rows("particle_x", 0, banded.n)[:, 1]
+        band = (y >= np.float32(0.1)) & (y < np.float32(0.3))
+        assert band.any() and not band.all()
+        for name in written:
+            every, some = (sim.backend.read_rows(name, 0, sim.n) for sim in (whole, banded))
+            assert (every != -7.0).all(), name
+            assert np.array_equal(some[band], every[band]) and (some[~band] == -7.0).all(), name
 
 
 @pytest.mark.vulkan
@@ -1193,7 +1224,7 @@ with sphcore.Simulation(scene, id_order=True, keep=keep) as sim:
             bound["old"] = sim.energy_start
             np.savez(f"{out}/old_checkpoint_{sim.step_count}.npz", **sim.checkpoint())
             np.savez(f"{out}/old_final_{sim.step_count}.npz", **final_arrays(sim, state))
-            sim.load(held, rank.owned_cells())
+            sim.load(held, rank.slab_fields())
 """
 
 

@@ -23,6 +23,7 @@ layout(local_size_x_id = 0) in;
 #include "density_diffusion.glsl"
 #include "equation_of_state.glsl"
 #include "dfsph.glsl"
+#include "summed.glsl"
 
 layout(std430, binding = 16) readonly buffer ObstacleBox { vec4 obstacle_box[]; };
 #include "obstacles.glsl"
@@ -107,9 +108,12 @@ void add_rate(uint i, uint j, uint image, real3 r, real r2, real3 xi, real3 vi, 
 }
 
 void main() {
-    // [1] one invocation per particle; the grid is rounded up to whole work groups
+    // [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
+    //     the rows whose density a step reads alone (summed.glsl; the others keep what they held)
     uint i = gl_GlobalInvocationID.x;
     if (i >= P.n) return;
+    if (LIST_SKIN > 0u && D.level != 1u && i == 0u) control[CONTROL_BUILDS] += 1u;
+    if (!summed_row(particle_x[i][DIM - 1u])) return;
     // [2] own position; with continuity density also the velocity and the density (state)
     real3 xi = particle_x[i].xyz;
     real3 vi = real3(0.0);
@@ -245,5 +249,4 @@ void main() {
     if (MAX_NEIGHBOURS > 0u && !walk) neighbour_count[i] = count;  // (longer than its slots: compute_forces
                                                                          // scans, DFSPH stops)
     if (LIST_SKIN > 0u && !walk) scratch_x[i] = particle_x[i];  // (where the list was built: integrate, the walks)
-    if (LIST_SKIN > 0u && !walk && i == 0u) control[CONTROL_BUILDS] += 1u;
 }

@@ -41,10 +41,8 @@ layout(std430, binding = 24) buffer Control { uint control[]; };  // LIST_SKIN: 
 layout(std430, binding = 29) readonly buffer Neighbours { uint neighbours[]; };
 layout(std430, binding = 29) readonly buffer NeighbourChunks { uvec4 neighbour_chunks[]; };  // (the same, by chunks)
 layout(std430, binding = 30) readonly buffer NeighbourCount { uint neighbour_count[]; };
-layout(std430, binding = 35) readonly buffer PickTable { uvec4 pick_table[]; };  // a rank's two passes (D.level)
-layout(std430, binding = 38) readonly buffer LayerStart { uint layer_start[]; };
-layout(std430, binding = 44) buffer BandRows { uvec2 band_rows[]; };
-#include "pick_table.glsl"
+layout(std430, binding = 44) readonly buffer BandRows { uvec2 band_rows[]; };  // a rank's two passes (D.level)
+#include "band_rows.glsl"
 layout(std430, binding = 31) readonly buffer NeighbourGradients { real4 neighbour_gradients[]; };  // (unread: named by
                                                                                            // neighbour_list.glsl)
 #include "neighbour_list.glsl"
@@ -86,32 +84,22 @@ void pair(uint i, uint j, uint image, real3 r, real r2, real3 inward) {
 }
 #include "walk.glsl"
 
-// Whether row i is one the pick reads, as the first pass found them (band_rows).
-bool band_row(uint i) {
-    for (uint e = 0u; e < band_rows[0].x; e++) {
-        if (i >= band_rows[1u + e].x && i - band_rows[1u + e].x < band_rows[1u + e].y) return true;
-    }
-    return false;
-}
-
 void main() {
     // [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
     //     (P.owned_end > 0) the rows the sort gave its slab's cells alone: nothing reads a halo row's acceleration
-    //     (the next exchange writes over the row)
+    //     (the next exchange writes over the row). A rank whose exchange overlaps the step's end runs two passes:
+    //     D.level 1 one invocation per row its pick reads (band_rows.glsl: an indirect dispatch of as many), which it
+    //     sends before the second, D.level 2 the others; else (0) one takes every row
     uint i = gl_GlobalInvocationID.x;
-    if (D.level == 1u && i == 0u) {  // (the first pass's rows for the second: pick_table is the next step's by then)
-        band_rows[0].x = pick_table[0].x;
-        for (uint e = 0u; e < pick_table[0].x; e++) band_rows[1u + e] = entry_rows(e);
-    }
+    uint e;
+    if (D.level == 1u && !band_row_at(gl_GlobalInvocationID.x, i, e)) return;
     if (i >= P.n) return;
     if (P.owned_end > 0u && (i < cell_start[P.owned_first]
                              || (P.owned_end < P.cell_total && i >= cell_start[P.owned_end]))) {
         if (LIST_SKIN > 0u && i == 0u) control[CONTROL_REBUILD] = 0u;
         return;
     }
-    //     A rank whose exchange overlaps the step's end runs two passes: D.level 1 the rows its pick reads, which it
-    //     sends before the second, D.level 2 the others (pick_table.glsl, band_rows); else (0) one takes every row
-    if (D.level > 0u && (D.level == 1u ? picked_row(i) : band_row(i)) != (D.level == 1u)) return;
+    if (D.level == 2u && band_row(i)) return;
     // [2] own state (BODIES: whether i is a wall particle)
     wall_i = BODIES && particle_id[i] >= P.fluid_count;
     real3 xi = particle_x[i].xyz;

@@ -1,9 +1,10 @@
 #version 460
 // After a step of a rank of sphcore.parallel (the step's last stage, or alone before the exchange; D.level 1: before
 // integrate, where the exchange overlaps the step's end): the rows of its slab each other rank needs for the next
-// step, packed for the exchange (sphcore.parallel.Rank.exchange). One invocation per row. Entry e of pick_table is one
+// step, packed for the exchange (sphcore.parallel.Rank.exchange). Entry e of pick_table is one
 // other rank (pick_table.glsl): the layers whose rows it may need (those the step's sort gave the layers near its
-// slab: decomposition.bands) and the layers of its slab under the next cuts; its slots follow those of the entries
+// slab: decomposition.bands; pick_groups.comp wrote them in band_rows) and the layers of its slab under the next cuts;
+// one invocation takes one entry's row (a row two entries read, one for each); its slots follow those of the entries
 // before it: two zones of as many as the rows it may need, each rounded up to PICK_ALIGN rows (the copies that read
 // them back start on 16 bytes). A row whose layer (as count_cells finds it) is in that slab is the rank's from then on
 // (a migrant: what a step reads of a particle before writing it); a row within the halo's width of the slab
@@ -43,13 +44,16 @@ layout(std430, binding = 35) readonly buffer PickTable { uvec4 pick_table[]; };
 layout(std430, binding = 36) readonly buffer PickBounds { vec4 pick_bounds[]; };
 layout(std430, binding = 37) buffer PickCount { uint pick_count[]; };
 layout(std430, binding = 38) readonly buffer LayerStart { uint layer_start[]; };
+layout(std430, binding = 44) readonly buffer BandRows { uvec2 band_rows[]; };
 #include "pick_table.glsl"
+#include "band_rows.glsl"
 #include "integrate_row.glsl"
 
 void main() {
-    // [1] one invocation per row an entry reads
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= P.n || !picked_row(i)) return;
+    // [1] one invocation per row an entry reads (band_rows.glsl: an indirect dispatch of as many), entry after entry
+    uint i;
+    uint e;
+    if (!band_row_at(gl_GlobalInvocationID.x, i, e) || i >= P.n) return;
     // [2] the row as it is, or at D.level 1 as integrate will store it (a body's wall particle stays)
     real4 x = particle_x[i];
     real4 v = particle_v[i];
@@ -70,29 +74,25 @@ void main() {
     uint axis = DIM - 1u;
     uint layer = uint(clamp(cell_of(x.xyz)[axis], 0, int(P.grid_dim[axis]) - 1));
     real coordinate = x[axis];
-    // [4] each rank the row may go to (pick_table.glsl), and the slot it takes there
-    uint base = 0u;
-    for (uint e = 0u; e < pick_table[0].x; e++) {
-        uvec4 entry = pick_table[1u + e];
-        uvec2 rows = entry_rows(e);
-        uint zone = zone_of(rows.y);
-        uint slot = base;
-        base += 2u * zone;
-        if (i < rows.x || i - rows.x >= rows.y) continue;
-        uint k;
-        if (layer >= entry.z && layer < entry.w) {
-            k = slot + atomicAdd(pick_count[2u * e], 1u);
-        } else if (coordinate >= real(pick_bounds[e].x) && coordinate < real(pick_bounds[e].y)) {
-            k = slot + zone + atomicAdd(pick_count[2u * e + 1u], 1u);
-        } else {
-            continue;
-        }
-        if (slot + 2u * zone > P.n) continue;
-        // [5] the row packed into slot k
-        scratch_x[k] = x;
-        scratch_v[k] = v;
-        scratch_id[k] = particle_id[i];
-        scratch_rho[k] = particle_rho[i];
-        if (VERLET) scratch_vh[k] = vh;
+    // [4] whether its entry's rank (pick_table.glsl) takes it, and the slot it takes there: its entry's zones follow
+    //     those of the entries before it
+    uint slot = 0u;
+    for (uint f = 0u; f < e; f++) slot += 2u * zone_of(band_rows[1u + f].y);
+    uint zone = zone_of(band_rows[1u + e].y);
+    uvec4 entry = pick_table[1u + e];
+    uint k;
+    if (layer >= entry.z && layer < entry.w) {
+        k = slot + atomicAdd(pick_count[2u * e], 1u);
+    } else if (coordinate >= real(pick_bounds[e].x) && coordinate < real(pick_bounds[e].y)) {
+        k = slot + zone + atomicAdd(pick_count[2u * e + 1u], 1u);
+    } else {
+        return;
     }
+    if (slot + 2u * zone > P.n) return;
+    // [5] the row packed into slot k
+    scratch_x[k] = x;
+    scratch_v[k] = v;
+    scratch_id[k] = particle_id[i];
+    scratch_rho[k] = particle_rho[i];
+    if (VERLET) scratch_vh[k] = vh;
 }

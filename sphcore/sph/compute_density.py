@@ -24,6 +24,7 @@ from sphcore.sph.kernels import kernels
 from sphcore.sph.neighbour_list import neighbour_list
 from sphcore.sph.obstacles import obstacles
 from sphcore.sph.pairs import pairs
+from sphcore.sph.summed import summed_row
 from sphcore.workgroups import launcher
 
 
@@ -45,7 +46,7 @@ def can_list_first(spec):
 
 @lru_cache(maxsize=None)
 def compute_density(spec, real=np.float32):
-    GRID, NEIGHBOUR_STATS = spec.GRID, spec.NEIGHBOUR_STATS
+    DIM, GRID, NEIGHBOUR_STATS = spec.DIM, spec.GRID, spec.NEIGHBOUR_STATS
     cell_of = cells(spec, real).cell_of
     reflected = cells(spec, real).reflected
     range_count = cells(spec, real).range_count
@@ -123,8 +124,13 @@ def compute_density(spec, real=np.float32):
                              neighbours, neighbour_count):
         P = params[0]
         D = params[0]  # (the dispatch's push constants: on numba, fields of the same record)
-        # [1] one invocation per particle; the grid is rounded up to whole work groups
+        # [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
+        #     the rows whose density a step reads alone (summed.py; the others keep what they held)
         if i >= P.n:
+            return
+        if LIST_SKIN > 0 and D.level != 1 and i == 0:
+            control[CONTROL_BUILDS] += 1
+        if not summed_row(P, particle_x[i, DIM - 1]):
             return
         # [2] own position; with continuity density also the velocity and the density (state)
         xi_x = particle_x[i, 0]
@@ -275,7 +281,5 @@ def compute_density(spec, real=np.float32):
         if LIST_SKIN > 0 and not walk:
             for c in range(4):
                 scratch_x[i, c] = particle_x[i, c]  # (where the list was built: integrate, the walks)
-        if LIST_SKIN > 0 and not walk and i == 0:
-            control[CONTROL_BUILDS] += 1
 
     return launcher(compute_density_main)

@@ -15,10 +15,10 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from sphcore.sph.band_rows import band_row, band_row_at
 from sphcore.sph.cohesion import cohesion
 from sphcore.sph.dfsph import CONTROL_REBUILD
 from sphcore.sph.kernels import kernels
-from sphcore.sph.pick_table import pick_table_functions
 from sphcore.sph.pairs import pairs
 from sphcore.sph.pressure import pressure
 from sphcore.sph.shifting import shifting
@@ -26,15 +26,6 @@ from sphcore.sph.viscosity import viscosity
 from sphcore.sph.walk import walk
 from sphcore.sph.walls import walls
 from sphcore.workgroups import launcher
-
-
-@njit
-def band_row(i, band_rows):
-    """Whether row i is one the pick reads, as the first pass found them (band_rows)."""
-    for e in range(np.int64(band_rows[0, 0])):
-        if i >= np.int64(band_rows[1 + e, 0]) and i - np.int64(band_rows[1 + e, 0]) < np.int64(band_rows[1 + e, 1]):
-            return True
-    return False
 
 
 @lru_cache(maxsize=None)
@@ -48,8 +39,6 @@ def compute_forces(spec, real=np.float32):
     kernel_laplacian = kernels(spec, real).kernel_laplacian
     pressure_monaghan = pressure(real)
     pair_direction = pairs(real)
-    table = pick_table_functions(spec)
-    entry_rows, picked_row = table.entry_rows, table.picked_row
     cohesion_becker = cohesion(spec, real)
     shifting_lind = shifting(spec, real).shifting_lind
 
@@ -105,15 +94,17 @@ def compute_forces(spec, real=np.float32):
     @njit
     def compute_forces_main(i, params, particle_x, particle_v, particle_a, particle_rho, particle_p, particle_id,
                             cell_pyramid, cell_start, scratch_x, obstacle_box, control, neighbours,
-                            neighbour_count, particle_shift, pick_table, layer_start, band_rows):
+                            neighbour_count, particle_shift, band_rows):
         P = params[0]
         # [1] one invocation per particle; the grid is rounded up to whole work groups. On a rank of sphcore.parallel
         #     (P.owned_end > 0) the rows the sort gave its slab's cells alone: nothing reads a halo row's
-        #     acceleration (the next exchange writes over the row)
-        if P.level == 1 and i == 0:  # (the first pass's rows for the second: pick_table is the next step's by then)
-            band_rows[0, 0] = pick_table[0, 0]
-            for e in range(np.int64(pick_table[0, 0])):
-                band_rows[1 + e, 0], band_rows[1 + e, 1] = entry_rows(P, e, pick_table, layer_start)
+        #     acceleration (the next exchange writes over the row). A rank whose exchange overlaps the step's end
+        #     runs two passes: D.level 1 one invocation per row its pick reads (band_rows.py: an indirect dispatch of
+        #     as many), which it sends before the second, D.level 2 the others; else (0) one takes every row
+        if P.level == 1:
+            found, i, e = band_row_at(i, band_rows)
+            if not found:
+                return
         if i >= P.n:
             return
         if P.owned_end > 0 and (i < cell_start[P.owned_first] or (P.owned_end < P.cell_total
@@ -121,11 +112,7 @@ def compute_forces(spec, real=np.float32):
             if LIST_SKIN > 0 and i == 0:
                 control[CONTROL_REBUILD] = 0
             return
-        #     A rank whose exchange overlaps the step's end runs two passes: D.level 1 the rows its pick reads, which
-        #     it sends before the second, D.level 2 the others (pick_table.glsl, band_rows); else (0) one takes
-        #     every row
-        if P.level > 0 and (picked_row(P, i, pick_table, layer_start) if P.level == 1 else band_row(i, band_rows)) \
-                != (P.level == 1):
+        if P.level == 2 and band_row(i, band_rows):
             return
         # [2] own state (BODIES: whether i is a wall particle)
         wall_i = BODIES and particle_id[i] >= P.fluid_count

@@ -11,7 +11,7 @@ from numba import njit
 
 PICK_ALIGN = 4  # rows: 16 bytes of a 4-byte buffer
 
-PickTable = namedtuple("PickTable", "row_of entry_rows zone_of picked_row")
+PickTable = namedtuple("PickTable", "row_of entry_rows zone_of")
 
 
 @lru_cache(maxsize=None)
@@ -34,13 +34,4 @@ def pick_table_functions(spec):
         """The slots of each of an entry's two zones (migrants, halo): its rows rounded up to PICK_ALIGN."""
         return (rows + PICK_ALIGN - 1) // PICK_ALIGN * PICK_ALIGN
 
-    @njit
-    def picked_row(P, i, pick_table, layer_start):
-        """Whether row i is an entry's (one the pick reads)."""
-        for e in range(np.int64(pick_table[0, 0])):
-            first, count = entry_rows(P, e, pick_table, layer_start)
-            if i >= first and i - first < count:
-                return True
-        return False
-
-    return PickTable(row_of, entry_rows, zone_of, picked_row)
+    return PickTable(row_of, entry_rows, zone_of)
