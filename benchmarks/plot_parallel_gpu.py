@@ -1,6 +1,7 @@
 """Plot benchmarks/parallel_gpu.py's JSON lines: ms per step against GPUs, strong and weak scaling, with the part
-spent in the exchange (rows between ranks: through host memory, or from GPU to GPU) shaded; prints the table with each case's
-efficiency (strong: T1 / (N TN); weak: T1 / TN; T1 the 1-rank driver's, and against the plain 1-GPU run where
+the slowest rank's host spends in the exchange (rows between ranks: through host memory, or from GPU to GPU; the
+Allgather's wait for the other ranks included) shaded, while its GPU runs the step's end beside it where they
+overlap; prints the table with each case's efficiency (strong: T1 / (N TN); weak: T1 / TN; T1 the 1-rank driver's, and against the plain 1-GPU run where
 measured) and writes it as JSON beside the plot.
 
     python benchmarks/plot_parallel_gpu.py benchmarks/results/parallel_gpu/parallel_gpu.json --out x.png
@@ -43,8 +44,9 @@ def main():
     for r in rows:
         print(f"{r['scaling']:6} {r['ranks']} GPUs {r['particles']:>11,} particles: {r['ms_per_step']:9.2f} ms/step, "
               f"{100 * r['host_staged_share']:5.1f} % in the exchange, efficiency "
-              f"{r.get('efficiency', float('nan')):.2f} (against the plain 1-GPU run: "
-              f"{r.get('efficiency_vs_plain', float('nan')):.2f})")
+              f"{r.get('efficiency', float('nan')):.2f}"
+              + (f" (against the plain 1-GPU run: {r['efficiency_vs_plain']:.2f})"
+                 if "efficiency_vs_plain" in r else ""))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
     for ax, scaling in zip(axes, ("strong", "weak")):
         case = [r for r in rows if r["scaling"] == scaling]
@@ -55,7 +57,7 @@ def main():
         ms = [r["ms_per_step"] for r in case]
         ax.bar(ranks, ms, width=0.6, color="tab:blue", label="step")
         ax.bar(ranks, [m * r["host_staged_share"] for m, r in zip(ms, case)], width=0.6, color="tab:orange",
-               label="the exchange")
+               label="the host in the exchange (the GPU runs beside it)")
         ideal = [ms[0] / (n / ranks[0]) if scaling == "strong" else ms[0] for n in ranks]
         ax.plot(ranks, ideal, "k--", label="ideal")
         plain = case[0].get("plain_ms_per_step")
