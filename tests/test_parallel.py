@@ -836,8 +836,9 @@ def test_a_rank_samples_the_gauges_of_its_slab(backend):
 @pytest.mark.skipif(mpiexec() is None, reason="needs mpi4py and an mpiexec: pip install 'sphcore[mpi]'")
 @pytest.mark.parametrize("config", [gauged(small_dam_break()), gauged(fixed_dt(small_dam_break_3d())),
                                     gauged(fixed_dt(small_dam_break(precision="float64"))),
-                                    gauged(small_dam_break(list_skin=0.2))],
-                         ids=["2d", "3d_fixed_dt", "2d_float64_fixed_dt", "2d_list_skin"])
+                                    gauged(small_dam_break(list_skin=0.2)),
+                                    gauged(small_dam_break(shifting="lind"))],
+                         ids=["2d", "3d_fixed_dt", "2d_float64_fixed_dt", "2d_list_skin", "2d_shifting"])
 def test_dam_break_on_two_ranks_is_bitwise_one_rank(tmp_path, config):
     """`mpiexec -n 2 sphcore run` of a dam break (particles cross the cuts as the column falls) gives bitwise the
     final state and the gauges of the same driver on one rank, and its checkpoint resumes on one rank to the same

@@ -48,8 +48,8 @@ layout(std140, binding = 63) uniform Params {
     uint cells_first;     // the cells the grid's cell stages take, cells_first .. cells_end - 1 (cells_end 0: every
     uint cells_end;       // cell): on a rank the layers its particles can be in, and a margin; every other cell is
                           // empty (clear_cells, reduce_cells, cell_offsets, sort_cells)
-    float summed_min;     // the rows compute_density and integrate_density take on a rank (owned_end > 0): those
-    float summed_max;     // whose coordinate along the slab axis lies in summed_min .. summed_max (summed.glsl)
+    float summed_min;     // the rows compute_density takes on a rank (owned_end > 0): those whose coordinate along
+    float summed_max;     // the slab axis lies in summed_min .. summed_max (summed.glsl)
 } P;
 
 // Per dispatch (push constants: 128 bytes on lavapipe, so only what changes between dispatches).
