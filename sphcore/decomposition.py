@@ -44,6 +44,11 @@ DEPTH = 2  # neighbour levels one step reads: forces of owned particles <- densi
 BODIES_DEPTH = 3  # with bodies: forces <- a wall particle's pressure <- its fluid's densities <- positions
 
 
+def depth(scene):
+    """The neighbour levels a step of `scene` reads: BODIES_DEPTH where it has bodies, else DEPTH."""
+    return BODIES_DEPTH if scene.spec.BODIES else DEPTH
+
+
 def slab_axis(dim):
     """The axis the slabs are cut along: the grid's slowest (the last: y in 2D, z in 3D)."""
     return dim - 1
@@ -57,16 +62,14 @@ def halo_width(scene):
     the scene has bodies) times the reach (and MARGIN); with a height gauge, half a spacing more (its line's point
     below the slab: sample_gauges.comp)."""
     height = any(gauge["quantity"] == "height" for gauge in scene.config.get("gauges", []))
-    depth = BODIES_DEPTH if scene.spec.BODIES else DEPTH
-    return (depth * scene.reach + (scene["fluid.spacing"] / 2 if height else 0.0)) * MARGIN
+    return (depth(scene) * scene.reach + (scene["fluid.spacing"] / 2 if height else 0.0)) * MARGIN
 
 
 def summed_width(scene):
     """How far past its slab [m] a rank sums the densities of the particles it holds (compute_density: summed.glsl):
     a reach less than the halo's DEPTH (BODIES_DEPTH) reaches, and MARGIN. The halo's outermost reach is held for
     those sums alone, and a height gauge's points past the slab read positions alone (sample_gauges.comp)."""
-    depth = BODIES_DEPTH if scene.spec.BODIES else DEPTH
-    return (depth - 1) * scene.reach * MARGIN
+    return (depth(scene) - 1) * scene.reach * MARGIN
 
 
 def layers_of(coordinate, box_min, inv_cell, layers):

@@ -155,6 +155,9 @@ def over_rows(name, level=0):
     return Stage(name, level, True)
 
 
+PICK = [PICK_GROUPS, over_rows("pick_rows")]  # the pick after a step's stages, or alone
+
+
 def write_groups(backend, row, invocations):
     """Row `row` of rank_groups: the work groups of `invocations` invocations, as pick_groups.comp writes row 0 (the
     host writes row 1, place_rows', with the rows received)."""
@@ -372,7 +375,7 @@ class Rank:
             writes, place = self.exchange()  # [1]-[3] (and the pick's table: write_pick)
         start = self.lap("exchange", start)
         backend, self.published = self.sim.backend, None
-        pick = [PICK_GROUPS, over_rows("pick_rows")] if self.entries else []  # (none on one rank)
+        pick = PICK if self.entries else []  # (none on one rank)
         stages = self.before_dt  # [4]
         if self.adaptive:  # (up to the dt, waited for, the last step's second too; then the dt over the ranks)
             backend.run_stages(place + self.before_dt, writes)
@@ -488,8 +491,9 @@ class Rank:
             self.seconds["exchange"] -= waited
         # a resize only where the count or the slab changed, or to have reused lists built (the rows moved and
         # written are listed by row: the buffers keep the rows past a smaller count)
-        if n != self.sim.n or tuple(P[list(SLAB_FIELDS)]) != self.slab_fields() or self.sim.scene.spec.LIST_SKIN:
-            self.sim.resize(n, self.slab_fields(), ahead=placed)
+        slab = self.slab_fields()
+        if n != self.sim.n or tuple(P[list(SLAB_FIELDS)]) != slab or self.sim.scene.spec.LIST_SKIN:
+            self.sim.resize(n, slab, ahead=placed)
         if placed:
             self.lap("write", start)
             return ([], move), [over_rows("place_rows")]
@@ -630,7 +634,7 @@ class Rank:
             if 2 * zones.sum() > self.sim.n:  # (the table's rows held as they were)
                 self.sim.resize(int(2 * zones.sum()), self.slab_fields())
                 backend.write_rows("pick_count", 0, np.zeros(2 * PICK_ENTRIES, np.uint32))
-            backend.run_stages([PICK_GROUPS, over_rows("pick_rows")])
+            backend.run_stages(PICK)
             picked, self.published = backend.read_rows("pick_count", 0, 2 * len(self.entries)), None
         self.picked = None
         rows, regions = np.zeros((self.size, 2), np.int64), []

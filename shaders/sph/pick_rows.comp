@@ -43,7 +43,7 @@ layout(std430, binding = 40) writeonly buffer ScratchVh { real4 scratch_vh[]; };
 layout(std430, binding = 35) readonly buffer PickTable { uvec4 pick_table[]; };
 layout(std430, binding = 36) readonly buffer PickBounds { vec4 pick_bounds[]; };
 layout(std430, binding = 37) buffer PickCount { uint pick_count[]; };
-layout(std430, binding = 38) readonly buffer LayerStart { uint layer_start[]; };
+layout(std430, binding = 38) readonly buffer LayerStart { uint layer_start[]; };  // (unread: named by pick_table.glsl)
 layout(std430, binding = 44) readonly buffer BandRows { uvec2 band_rows[]; };
 #include "pick_table.glsl"
 #include "band_rows.glsl"
